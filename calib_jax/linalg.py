@@ -1,0 +1,110 @@
+"""Small dense linear algebra in plain jnp operations.
+
+The calibration problems solve 3x3 and ~10x10 systems, millions of times under vmap. XLA's
+CPU LAPACK custom calls are a poor fit for that: per-call overhead dominates, and on this
+2-core machine jaxlib 0.10's batched triangular solve (``ParallelBatchMap`` on the Eigen
+intra-op pool) deadlocked intermittently inside a ``while_loop`` (seen here: the process
+sleeps at 0 % CPU forever; see also PyAutoFit issue #1528, the same wedge). Writing these
+solves out in elementwise operations avoids both: no custom call, no thread pool, and
+vmap turns them into vector arithmetic across sensors.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+_UNROLL_MAX = 16
+
+
+def inv3(a: jax.Array) -> jax.Array:
+    """Inverse of a 3x3 matrix by the adjugate (NaN/inf when singular, never an exception)."""
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    c10 = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
+    c11 = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
+    c12 = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
+    c20 = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
+    c21 = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
+    c22 = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    adj = jnp.stack(
+        [jnp.stack([c00, c10, c20]), jnp.stack([c01, c11, c21]), jnp.stack([c02, c12, c22])]
+    )
+    return adj / det
+
+
+def cho_solve_small(a: jax.Array, b: jax.Array) -> jax.Array:
+    """Solve a x = b for a symmetric positive-definite n x n matrix by Cholesky.
+
+    Unrolled in jnp operations for n <= 16; larger systems use jax.scipy's LAPACK Cholesky.
+    Returns NaN when a is not positive definite (the caller treats that as a failed step).
+    """
+    n = a.shape[0]
+    if n > _UNROLL_MAX:
+        return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a), b)
+    L = [[None] * n for _ in range(n)]
+    for j in range(n):
+        s = a[j, j]
+        for k in range(j):
+            s = s - L[j][k] * L[j][k]
+        d = jnp.sqrt(jnp.where(s > 0, s, jnp.nan))
+        L[j][j] = d
+        for i in range(j + 1, n):
+            t = a[i, j]
+            for k in range(j):
+                t = t - L[i][k] * L[j][k]
+            L[i][j] = t / d
+    y = [None] * n
+    for i in range(n):
+        t = b[i]
+        for k in range(i):
+            t = t - L[i][k] * y[k]
+        y[i] = t / L[i][i]
+    x = [None] * n
+    for i in reversed(range(n)):
+        t = y[i]
+        for k in range(i + 1, n):
+            t = t - L[k][i] * x[k]
+        x[i] = t / L[i][i]
+    return jnp.stack(x)
+
+
+def eigh_small(a: jax.Array, sweeps: int = 12) -> tuple[jax.Array, jax.Array]:
+    """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations.
+
+    Returns (eigenvalues ascending, eigenvectors as columns), like ``jnp.linalg.eigh``, in
+    plain jnp operations (see the module docstring for why). Quadratic convergence: 12 sweeps
+    are ample for n <= 16 in float64.
+    """
+    n = a.shape[0]
+    if n > _UNROLL_MAX:
+        return jnp.linalg.eigh(a)
+    pairs = [(p, q) for p in range(n - 1) for q in range(p + 1, n)]
+    ps = jnp.array([p for p, _ in pairs])
+    qs = jnp.array([q for _, q in pairs])
+    eye = jnp.eye(n, dtype=a.dtype)
+
+    def rotate(k, carry):
+        A, V = carry
+        p, q = ps[k], qs[k]
+        apq = A[p, q]
+        app, aqq = A[p, p], A[q, q]
+        active = jnp.abs(apq) > 0
+        theta = (aqq - app) / (2.0 * jnp.where(active, apq, 1.0))
+        t = jnp.sign(theta) / (jnp.abs(theta) + jnp.sqrt(theta * theta + 1.0))
+        t = jnp.where(theta == 0, 1.0, t)
+        t = jnp.where(active, t, 0.0)
+        c = 1.0 / jnp.sqrt(t * t + 1.0)
+        s = t * c
+        G = eye.at[p, p].set(c).at[q, q].set(c).at[p, q].set(s).at[q, p].set(-s)
+        return G.T @ A @ G, V @ G
+
+    def sweep(_, carry):
+        return jax.lax.fori_loop(0, len(pairs), rotate, carry)
+
+    A, V = jax.lax.fori_loop(0, sweeps, sweep, (a, eye))
+    w = jnp.diag(A)
+    order = jnp.argsort(w)
+    return w[order], V[:, order]

@@ -1,0 +1,21 @@
+"""Least-squares solvers: Gavin's Levenberg-Marquardt in JAX and an optimistix cross-check."""
+
+from .gavin import DEFAULTS, GAVIN_DEFAULTS, LMDefaults, finite_difference_jacobian, lm_solve
+from .optx import optx_solve
+from .result import LMHistory, LMResult, uncertainty
+from .status import Status, is_converged, status_message
+
+__all__ = [
+    "DEFAULTS",
+    "GAVIN_DEFAULTS",
+    "LMDefaults",
+    "LMHistory",
+    "LMResult",
+    "Status",
+    "finite_difference_jacobian",
+    "is_converged",
+    "lm_solve",
+    "optx_solve",
+    "status_message",
+    "uncertainty",
+]

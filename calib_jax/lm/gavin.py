@@ -1,0 +1,385 @@
+"""Levenberg-Marquardt after Gavin's ``lm.m``, as fixed in ``shared/docs/LM_SPEC.md``.
+
+Paper 1 (section 2.4-2.5) uses this algorithm; its text is garbled, so the facts below follow
+the spec. Notation: residual e(p) = y - y_hat(p) (m values), weights w (the diagonal of W),
+chi2 = e'We, J = de/dp (so J'WJ is the spec's J'WJ and g = -J'We is the spec's J'W(y - y_hat)).
+
+Update types (a static choice, one compilation each):
+
+=====  =========================  ==============================  ===========================
+type   system                     accept                          reject
+=====  =========================  ==============================  ===========================
+1      (J'WJ + lam diag(J'WJ)) h  lam = max(lam / L_down, lo)     lam = min(lam * L_up, hi)
+2      (J'WJ + lam I) h, then     lam = max(lam / (1 + a), lo)    lam += |dchi2| / (2 a)
+       h <- a h with a = g'h / (dchi2/2 + 2 g'h)
+3      (J'WJ + lam I) h           lam *= max(1/3, 1-(2rho-1)^3)   lam *= nu; nu *= 2
+=====  =========================  ==============================  ===========================
+
+A step is accepted when rho > eps4, with rho = (chi2(p) - chi2(p+h)) / |h'(lam D h + g)|
+(``rho_form="current"``: the Gauss-Newton model's predicted decrease, D = diag(J'WJ) for type
+1 and I otherwise) or / (2 |h'(lam h + g)|) (``rho_form="paper"``, paper 1 eq. 13, Gavin 2013).
+
+Decisions where Gavin's code is odd (LM_SPEC "Known quirks"):
+
+* chi2 is monotone: a rejected step never changes the reference chi2 (Gavin restores the chi2
+  of the previous accepted point, which lets a later uphill step through).
+* With ``jacobian="broyden"`` the finite-difference Jacobian is recomputed at the first
+  iteration, every 2n iterations and after every rejected step (Gavin's "after a rise in chi2"
+  trigger, which never fires in his loop, fires here); the rank-1 update is applied after every
+  trial step, accepted or not, since the secant is valid either way.
+* lambda stays within [lambda_min, lambda_max] for all three types. A step that cannot be
+  solved (non-finite h) counts as a rejection; at lambda_max it ends the fit as ``SINGULAR``.
+* Besides tests 1-3, a rejected step whose actual and predicted chi2 changes are both below
+  16 eps chi2 ends the fit as ``CONVERGED_ROUNDOFF``: with thousands of samples the gradient at
+  the optimum is round-off, so the absolute tests alone can loop until the budget.
+* Convergence tests run after at least one accepted step. The parameter test looks at the last
+  trial step whether or not it was accepted (as Gavin does); eps2 is tight by default, so a
+  heavily damped step only passes it once lambda has grown by many orders of magnitude.
+
+Calibration defaults: Gavin's eps1 = eps2 = 1e-3 and eps3 = 1e-1 stop a well-scaled calibration
+after two or three iterations, far from the optimum (tests/test_lm.py shows it). calib_jax uses
+eps1 = 1e-12, eps2 = 1e-10 and eps3 = 0 (the reduced-chi2 test off), so fits end at the optimum
+to ~1e-10 relative and agree with SciPy's least_squares; set eps3 > 0 only with weights 1/sigma^2.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ..linalg import cho_solve_small
+from .result import LMHistory, LMResult, uncertainty
+from .status import Status
+
+_RUNNING = -1
+
+UpdateType = Literal[1, 2, 3]
+JacobianMode = Literal["exact", "broyden"]
+
+
+class LMDefaults(NamedTuple):
+    """Calibration defaults (see the module docstring for why they differ from Gavin's)."""
+
+    eps1: float = 1e-12
+    eps2: float = 1e-10
+    eps3: float = 0.0
+    eps4: float = 1e-1
+    lambda0: float = 1e-2
+    lambda_up: float = 11.0
+    lambda_down: float = 9.0
+    lambda_min: float = 1e-7
+    lambda_max: float = 1e7
+    max_iter: int = 200
+
+
+DEFAULTS = LMDefaults()
+GAVIN_DEFAULTS = LMDefaults(eps1=1e-3, eps2=1e-3, eps3=1e-1)
+"""Gavin's own defaults, kept for benchmarks and for showing the early-stop trap."""
+
+
+class _Carry(NamedTuple):
+    p: jax.Array
+    e: jax.Array
+    chi2: jax.Array
+    J: jax.Array
+    jtwj: jax.Array
+    g: jax.Array
+    lam: jax.Array
+    nu: jax.Array
+    it: jax.Array
+    nfev: jax.Array
+    njev: jax.Array
+    n_acc: jax.Array
+    status: jax.Array
+    hist_chi2: jax.Array
+    hist_lam: jax.Array
+    hist_acc: jax.Array
+
+
+def _safe_div(a, b, fallback):
+    """a / b where b != 0 and the result is finite, else fallback (NaN-safe double where)."""
+    ok = b != 0
+    q = a / jnp.where(ok, b, 1.0)
+    return jnp.where(ok & jnp.isfinite(q), q, fallback)
+
+
+def finite_difference_jacobian(
+    fun: Callable, p: jax.Array, args: Any, delta: float, scheme: str
+) -> jax.Array:
+    """J_ij = d e_i / d p_j by forward or central differences, step delta (1 + |p_j|).
+
+    Paper 1 eq. 14 (forward) and eq. 15 (central, the default).
+    """
+    n = p.shape[0]
+    steps = delta * (1.0 + jnp.abs(p))
+    basis = jnp.eye(n, dtype=p.dtype) * steps[:, None]
+    plus = jax.vmap(lambda dp: fun(p + dp, args))(basis)  # (n, m)
+    if scheme == "central":
+        minus = jax.vmap(lambda dp: fun(p - dp, args))(basis)
+        return ((plus - minus) / (2.0 * steps[:, None])).T
+    base = fun(p, args)
+    return ((plus - base[None, :]) / steps[:, None]).T
+
+
+def lm_solve(
+    fun: Callable[[jax.Array, Any], jax.Array],
+    p0: jax.Array,
+    args: Any = None,
+    *,
+    weights: jax.Array | None = None,
+    update_type: UpdateType = 1,
+    rho_form: Literal["current", "paper"] = "current",
+    jacobian: JacobianMode = "exact",
+    fd_scheme: Literal["central", "forward"] = "central",
+    fd_delta: float = 1e-6,
+    eps1: float = DEFAULTS.eps1,
+    eps2: float = DEFAULTS.eps2,
+    eps3: float = DEFAULTS.eps3,
+    eps4: float = DEFAULTS.eps4,
+    lambda0: float = DEFAULTS.lambda0,
+    lambda_up: float = DEFAULTS.lambda_up,
+    lambda_down: float = DEFAULTS.lambda_down,
+    lambda_min: float = DEFAULTS.lambda_min,
+    lambda_max: float = DEFAULTS.lambda_max,
+    max_iter: int = DEFAULTS.max_iter,
+    max_nfev: int | None = None,
+    history: bool = False,
+    absolute_sigma: bool = False,
+) -> LMResult:
+    """Minimise chi2(p) = sum_i w_i e_i(p)^2 by Gavin's Levenberg-Marquardt.
+
+    Pure and jittable; ``vmap`` it over sensors (every state variable is per member, and a
+    finished member is frozen while the others iterate).
+
+    Parameters
+    ----------
+    fun : callable ``fun(p, args) -> e``
+        Residual vector (m,), m > n. Differentiable in p for ``jacobian="exact"``.
+    p0 : (n,) array
+        Initial parameters.
+    weights : (m,) array, optional
+        Diagonal of W; zero weights mask samples out (padding). Default all ones.
+    update_type : {1, 2, 3}
+        Marquardt, quadratic line-search, Nielsen (LM_SPEC table). Static.
+    rho_form : {"current", "paper"}
+        Denominator of the acceptance ratio (see module docstring). Static.
+    jacobian : {"exact", "broyden"}
+        Autodiff Jacobian every accepted step, or paper 1's finite differences plus Broyden
+        rank-1 updates. Static.
+    eps1, eps2, eps3, eps4 : float
+        Gradient, parameter, reduced-chi2 and acceptance thresholds.
+    max_iter, max_nfev : int
+        Iteration and residual-evaluation budgets (static).
+    history : bool
+        Keep per-iteration chi2, lambda and acceptance in fixed buffers of length max_iter.
+    absolute_sigma : bool
+        Weights are 1/sigma^2: do not scale the covariance by the reduced chi2.
+
+    Returns
+    -------
+    LMResult
+    """
+    if update_type not in (1, 2, 3):
+        raise ValueError(f"update_type must be 1, 2 or 3, got {update_type!r}")
+    if rho_form not in ("current", "paper"):
+        raise ValueError(f"rho_form must be 'current' or 'paper', got {rho_form!r}")
+    if jacobian not in ("exact", "broyden"):
+        raise ValueError(f"jacobian must be 'exact' or 'broyden', got {jacobian!r}")
+    if fd_scheme not in ("central", "forward"):
+        raise ValueError(f"fd_scheme must be 'central' or 'forward', got {fd_scheme!r}")
+    p0 = jnp.asarray(p0)
+    if not jnp.issubdtype(p0.dtype, jnp.floating):
+        p0 = p0.astype(jnp.result_type(float))
+    dtype = p0.dtype
+    n = p0.shape[0]
+    e0 = fun(p0, args)
+    m = e0.shape[0]
+    if m <= n:
+        raise ValueError(
+            f"{m} residuals cannot determine {n} parameters; give more samples than parameters"
+        )
+    w = jnp.ones(m, dtype) if weights is None else jnp.asarray(weights, dtype)
+    max_nfev_ = 10**9 if max_nfev is None else int(max_nfev)
+    # Degrees of freedom count only samples with non-zero weight (padding is weight 0).
+    dof = jnp.maximum(jnp.sum(w > 0) - n, 1).astype(dtype)
+    n_fd = 2 * n if fd_scheme == "central" else n
+
+    def jac_exact(p):
+        return jax.jacfwd(fun)(p, args)
+
+    def jac_fd(p):
+        return finite_difference_jacobian(fun, p, args, fd_delta, fd_scheme)
+
+    def normal(J, e):
+        jw = J * w[:, None]
+        return jw.T @ J, -(jw.T @ e)
+
+    def chi2_of(e):
+        return jnp.sum(w * e * e)
+
+    if jacobian == "exact":
+        J0 = jac_exact(p0)
+        nfev0 = 1
+    else:
+        J0 = jac_fd(p0)
+        nfev0 = 1 + n_fd
+    jtwj0, g0 = normal(J0, e0)
+    chi2_0 = chi2_of(e0)
+    lam0 = lambda0 if update_type == 1 else lambda0 * jnp.max(jnp.diag(jtwj0))
+    finite0 = jnp.isfinite(chi2_0) & jnp.all(jnp.isfinite(J0))
+    hist_len = max_iter if history else 1
+    init = _Carry(
+        p=p0,
+        e=e0,
+        chi2=chi2_0,
+        J=J0,
+        jtwj=jtwj0,
+        g=g0,
+        lam=jnp.asarray(lam0, dtype),
+        nu=jnp.asarray(2.0, dtype),
+        it=jnp.asarray(0),
+        nfev=jnp.asarray(nfev0),
+        njev=jnp.asarray(1),
+        n_acc=jnp.asarray(0),
+        status=jnp.where(finite0, _RUNNING, int(Status.NONFINITE)),
+        hist_chi2=jnp.full(hist_len, jnp.nan, dtype),
+        hist_lam=jnp.full(hist_len, jnp.nan, dtype),
+        hist_acc=jnp.zeros(hist_len, bool),
+    )
+    eye = jnp.eye(n, dtype=dtype)
+
+    def body(c: _Carry) -> _Carry:
+        dj = jnp.diag(c.jtwj)
+        D = dj if update_type == 1 else jnp.ones_like(dj)
+        A = c.jtwj + c.lam * D * eye
+        h = cho_solve_small(A, c.g)
+        h_ok = jnp.all(jnp.isfinite(h))
+        h = jnp.where(h_ok, h, 0.0)
+        p_try = c.p + h
+        e_try = fun(p_try, args)
+        chi2_try = chi2_of(e_try)
+        nfev = c.nfev + 1
+        alpha = jnp.asarray(1.0, dtype)
+        if update_type == 2:
+            gh = c.g @ h
+            alpha = _safe_div(gh, (chi2_try - c.chi2) / 2.0 + 2.0 * gh, 1.0)
+            h = alpha * h
+            p_try = c.p + h
+            e_try = fun(p_try, args)
+            chi2_try = chi2_of(e_try)
+            nfev = nfev + 1
+        if rho_form == "paper":
+            pred = 2.0 * jnp.abs(h @ (c.lam * h + c.g))
+        else:
+            pred = jnp.abs(h @ (c.lam * D * h + c.g))
+        rho = _safe_div(c.chi2 - chi2_try, pred, -jnp.inf)
+        accept = h_ok & jnp.isfinite(chi2_try) & (rho > eps4)
+
+        # lambda update (LM_SPEC table), kept within [lambda_min, lambda_max]
+        if update_type == 1:
+            lam_acc = c.lam / lambda_down
+            lam_rej = c.lam * lambda_up
+            nu = c.nu
+        elif update_type == 2:
+            lam_acc = c.lam / (1.0 + alpha)
+            lam_rej = c.lam + _safe_div(jnp.abs(chi2_try - c.chi2), 2.0 * alpha, jnp.inf)
+            lam_rej = jnp.where(jnp.isfinite(lam_rej) & (lam_rej > c.lam), lam_rej, c.lam * lambda_up)
+            nu = c.nu
+        else:
+            lam_acc = c.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            lam_rej = c.lam * c.nu
+            nu = jnp.where(accept, 2.0, c.nu * 2.0)
+        lam = jnp.where(accept, lam_acc, lam_rej)
+        lam = jnp.clip(lam, lambda_min, lambda_max)
+
+        p = jnp.where(accept, p_try, c.p)
+        e = jnp.where(accept, e_try, c.e)
+        chi2 = jnp.where(accept, chi2_try, c.chi2)
+        if jacobian == "exact":
+            J = jax.lax.cond(accept, lambda: jac_exact(p_try), lambda: c.J)
+            njev = c.njev + accept.astype(c.njev.dtype)
+        else:
+            hh = h @ h
+            upd = jnp.outer(e_try - c.e - c.J @ h, h) / jnp.where(hh > 0, hh, 1.0)
+            J_b = jnp.where((hh > 0) & jnp.all(jnp.isfinite(upd)), c.J + upd, c.J)
+            refresh = ((c.it + 1) % (2 * n) == 0) | ~accept
+            J = jax.lax.cond(refresh, lambda: jac_fd(p), lambda: J_b)
+            nfev = nfev + jnp.where(refresh, n_fd, 0)
+            njev = c.njev + refresh.astype(c.njev.dtype)
+        jtwj, g = normal(J, e)
+        n_acc = c.n_acc + accept.astype(c.n_acc.dtype)
+        it = c.it + 1
+
+        started = n_acc > 0
+        conv_g = started & (jnp.max(jnp.abs(g)) < eps1)
+        conv_p = started & (jnp.max(jnp.abs(h) / (jnp.abs(p) + 1e-12)) < eps2)
+        conv_c = started & (chi2 / dof < eps3)
+        tiny_chi2 = 16.0 * jnp.finfo(dtype).eps * c.chi2
+        conv_r = (
+            started & ~accept & h_ok & (jnp.abs(c.chi2 - chi2_try) <= tiny_chi2) & (pred <= tiny_chi2)
+        )
+        singular = ~h_ok & (c.lam >= lambda_max)
+        out_of_budget = (it >= max_iter) | (nfev >= max_nfev_)
+        status = jnp.select(
+            [conv_g, conv_p, conv_c, conv_r, singular, out_of_budget],
+            [
+                int(Status.CONVERGED_GRADIENT),
+                int(Status.CONVERGED_PARAMETERS),
+                int(Status.CONVERGED_CHI2),
+                int(Status.CONVERGED_ROUNDOFF),
+                int(Status.SINGULAR),
+                int(Status.MAX_ITERATIONS),
+            ],
+            _RUNNING,
+        )
+        idx = jnp.minimum(c.it, hist_len - 1)
+        return _Carry(
+            p=p,
+            e=e,
+            chi2=chi2,
+            J=J,
+            jtwj=jtwj,
+            g=g,
+            lam=lam,
+            nu=nu,
+            it=it,
+            nfev=nfev,
+            njev=njev,
+            n_acc=n_acc,
+            status=status,
+            hist_chi2=c.hist_chi2.at[idx].set(chi2) if history else c.hist_chi2,
+            hist_lam=c.hist_lam.at[idx].set(c.lam) if history else c.hist_lam,
+            hist_acc=c.hist_acc.at[idx].set(accept) if history else c.hist_acc,
+        )
+
+    final = jax.lax.while_loop(lambda c: c.status == _RUNNING, body, init)
+    jtwj = final.jtwj
+    nfev = final.nfev
+    if jacobian == "broyden":
+        # Uncertainty needs a real Jacobian, not the Broyden approximation.
+        jtwj, _ = normal(jac_fd(final.p), final.e)
+        nfev = nfev + n_fd
+    reduced = final.chi2 / dof
+    cov, stderr, corr, cond = uncertainty(jtwj, reduced, absolute_sigma)
+    hist = (
+        LMHistory(chi2=final.hist_chi2, lam=final.hist_lam, accepted=final.hist_acc)
+        if history
+        else None
+    )
+    return LMResult(
+        params=final.p,
+        chi2=final.chi2,
+        reduced_chi2=reduced,
+        iterations=final.it,
+        nfev=nfev,
+        njev=final.njev,
+        status=final.status,
+        covariance=cov,
+        stderr=stderr,
+        correlation=corr,
+        condition=cond,
+        history=hist,
+    )

@@ -1,0 +1,74 @@
+"""Status codes of the least-squares solvers.
+
+Inside ``jit`` a solver never raises: it returns one of these integers. The host side turns
+them into messages (:func:`status_message`) and, where the user asked for it, exceptions.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class Status(enum.IntEnum):
+    """Why a least-squares solve stopped."""
+
+    CONVERGED_GRADIENT = 0
+    """max |J'W e| < eps1 (LM_SPEC convergence test 1)."""
+    CONVERGED_PARAMETERS = 1
+    """max |h_i| / (|p_i| + tiny) < eps2 (test 2)."""
+    CONVERGED_CHI2 = 2
+    """chi2 / (m - n) < eps3 (test 3, an absolute threshold)."""
+    MAX_ITERATIONS = 3
+    """The iteration or function-evaluation budget ran out before any test was met."""
+    NONFINITE = 4
+    """The residual is NaN or inf at the starting point; nothing was fitted."""
+    SINGULAR = 5
+    """The damped normal equations could not be solved even at the largest lambda."""
+    CONVERGED = 6
+    """An external solver (optimistix) met its own rtol/atol criteria."""
+    FAILED = 7
+    """An external solver reported a failure other than the budget."""
+    CONVERGED_ROUNDOFF = 8
+    """A step was rejected because neither the actual nor the predicted change of chi2 rose
+    above round-off (16 eps chi2): the fit is at the optimum to machine precision, though the
+    absolute tests 1-3 did not trigger (typical with many samples, where the gradient at the
+    optimum is dominated by round-off)."""
+
+
+CONVERGED_STATUSES = (
+    Status.CONVERGED_GRADIENT,
+    Status.CONVERGED_PARAMETERS,
+    Status.CONVERGED_CHI2,
+    Status.CONVERGED,
+    Status.CONVERGED_ROUNDOFF,
+)
+
+_MESSAGES = {
+    Status.CONVERGED_GRADIENT: "converged: the gradient is below eps1",
+    Status.CONVERGED_PARAMETERS: "converged: the parameter step is below eps2 (relative)",
+    Status.CONVERGED_CHI2: "converged: the reduced chi2 is below eps3",
+    Status.MAX_ITERATIONS: (
+        "not converged: the iteration budget ran out; raise max_iter or loosen eps1-eps3"
+    ),
+    Status.NONFINITE: (
+        "not fitted: the residual is NaN or inf at the starting point; remove non-finite "
+        "samples or give a finite initial guess"
+    ),
+    Status.SINGULAR: (
+        "not converged: the normal equations are singular; the data does not determine "
+        "every parameter (add poses that cover the sphere)"
+    ),
+    Status.CONVERGED: "converged: the external solver met its tolerances",
+    Status.FAILED: "not converged: the external solver reported a failure",
+    Status.CONVERGED_ROUNDOFF: "converged: chi2 no longer changes beyond round-off",
+}
+
+
+def status_message(status: int) -> str:
+    """Human-readable message for a status code."""
+    return _MESSAGES[Status(int(status))]
+
+
+def is_converged(status: int) -> bool:
+    """True for the statuses that mean the solver found a minimum."""
+    return Status(int(status)) in CONVERGED_STATUSES
