@@ -1,0 +1,426 @@
+"""From a raw accelerometer log to a calibration (paper 1, end to end).
+
+Host side (checks, units, static detection) around a pure jitted core:
+
+1. drop non-finite rows and samples on a saturated axis (counted, reported);
+2. units: counts, g or m/s^2, given or detected from the static norm;
+3. static intervals by moving variance (:mod:`calib_jax.static`);
+4. coverage checks: enough distinct poses, not all in one plane (error), not all in one
+   hemisphere (warning);
+5. normalise: x_n = (x - c0) / k with c0, k from an algebraic sphere fit, so the solver works on
+   unit-radius data whatever the input unit (tolerances then mean the same thing for counts and
+   for g); start from an algebraic ellipsoid fit (alpha = M^(-1/2), the nine-parameter model
+   *is* a centred ellipsoid with symmetric shape);
+6. fit the sphere residual (paper 1, eq. 6, divided by g^2) with the chosen solver;
+7. map back to input units (alpha = k alpha_n / g, beta = k beta_n + c0; covariance likewise),
+   and report the error before and after, the noise floor and what is poorly determined.
+
+The jitted core is compiled once per (solver, padded size): fit points are padded to a power
+of two with zero weights, so logs of similar length share one compilation.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings as _warnings
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .calibration import AccelCalibration
+from .geometry import ellipsoid_fit, sphere_fit, sqrtm_inv_spd
+from .io.files import SensorLog
+from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
+from .models.accel import PARAM_NAMES, normalized_sphere_residual
+from .static import StaticReport, detect_static, distinct_directions
+
+G_STANDARD = 9.80665
+SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
+Units = Literal["auto", "counts", "g", "m/s^2"]
+_UNIT_ALIASES = {"g": "g", "m/s^2": "m/s^2", "m/s2": "m/s^2", "mps2": "m/s^2", "counts": "counts",
+                 "count": "counts", "raw": "counts", "lsb": "counts", "a.u.": "counts", "au": "counts"}
+
+# A parameter is "poorly determined" when its standard error, in units of the reference
+# magnitude, exceeds this: 1 % of g is the accuracy paper 1 claims for the whole calibration.
+POOR_STDERR = 1e-2
+POOR_CONDITION = 1e8
+MIN_DISTINCT_POSES = 9
+
+
+# ---------------------------------------------------------------------------------------------
+# pure core
+
+
+def initial_guess(x: jax.Array, w: jax.Array) -> jax.Array:
+    """Start for the normalised fit: algebraic ellipsoid, or unit sphere at the fitted centre.
+
+    x is centred and scaled to about unit radius. Returns p_n (9,).
+    """
+    c, M, ok = ellipsoid_fit(x, w)
+    alpha = sqrtm_inv_spd(jnp.where(ok, M, jnp.eye(3, dtype=x.dtype)))
+    p_ell = jnp.concatenate(
+        [jnp.diag(alpha), jnp.stack([alpha[0, 1], alpha[0, 2], alpha[1, 2]]), c]
+    )
+    cs, r = sphere_fit(x, w)
+    p_sph = jnp.concatenate([jnp.full(3, r), jnp.zeros(3, x.dtype), cs])
+    use_ell = ok & jnp.all(jnp.isfinite(p_ell))
+    return jnp.where(use_ell, p_ell, p_sph)
+
+
+def _residual(p, data):
+    x, _ = data
+    return normalized_sphere_residual(p, x, 1.0)
+
+
+def fit_normalized(
+    x: jax.Array, w: jax.Array, solver: str = "lm1", **options
+) -> LMResult:
+    """Pure core: fit paper 1's model to unit-radius data x (N, 3) with weights w (N,).
+
+    Jittable and vmappable over sensors. ``solver`` and ``options`` are static.
+    """
+    p0 = initial_guess(x, w)
+    if solver == "optimistix":
+        return optx_solve(_residual, p0, (x, w), weights=w, **options)
+    update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
+    return lm_solve(_residual, p0, (x, w), weights=w, update_type=update_type, **options)
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(solver: str, options: tuple) -> callable:
+    return jax.jit(functools.partial(fit_normalized, solver=solver, **dict(options)))
+
+
+def _bucket(n: int) -> int:
+    return max(64, 1 << int(np.ceil(np.log2(max(n, 1)))))
+
+
+# ---------------------------------------------------------------------------------------------
+# host-side helpers
+
+
+def _units_from_norm(norm: float) -> str | None:
+    if 0.3 <= norm <= 3.0:
+        return "g"
+    if 3.0 < norm <= 30.0:
+        return "m/s^2"
+    if norm > 30.0:
+        return "counts"
+    return None
+
+
+def _saturated(x: np.ndarray, min_count: int = 20, min_fraction: float = 0.005) -> list[tuple[int, str, float]]:
+    """Axes whose extreme value is held by many samples: (axis, 'max'|'min', value)."""
+    out = []
+    n = len(x)
+    for ax in range(3):
+        col = x[:, ax]
+        for kind, v in (("max", col.max()), ("min", col.min())):
+            cnt = int(np.sum(col == v))
+            if cnt >= max(min_count, min_fraction * n):
+                out.append((ax, kind, float(v)))
+    return out
+
+
+def _nominal(x_static: np.ndarray, units: str, g: float) -> tuple[np.ndarray, float]:
+    """The 'before' conversion: offset and scale a user would assume without calibration.
+
+    Physical units: none (offset 0, scale 1). Counts: offset 2^(bits-1) for unsigned data
+    (all readings positive and centred near mid-range, like imu_tk's 16-bit Xsens counts), else
+    0; scale = median static norm / g.
+    """
+    if units != "counts":
+        return np.zeros(3), 1.0
+    offset = np.zeros(3)
+    lo, hi = x_static.min(), x_static.max()
+    if lo > 0:
+        bits = int(np.ceil(np.log2(hi + 1)))
+        mid = 2.0 ** (bits - 1)
+        if lo < mid < hi:
+            offset = np.full(3, mid)
+    scale = float(np.median(np.linalg.norm(x_static - offset, axis=1)) / g)
+    return offset, scale
+
+
+def _coverage(dirs: np.ndarray) -> tuple[float, np.ndarray, float, np.ndarray]:
+    """Smallest eigenvalue of the direction scatter (0 = a plane) and its normal; the
+    smallest cosine to the mean direction (> 0 = one hemisphere) and that direction."""
+    S = dirs.T @ dirs / len(dirs)
+    evals, evecs = np.linalg.eigh(S)
+    mean = dirs.mean(axis=0)
+    mn = np.linalg.norm(mean)
+    axis = mean / mn if mn > 0 else np.array([0.0, 0.0, 1.0])
+    return float(evals[0]), evecs[:, 0], float(np.min(dirs @ axis)), axis
+
+
+def _vec(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:+.2f}" for x in v) + "]"
+
+
+# ---------------------------------------------------------------------------------------------
+# the public entry point
+
+
+def calibrate_accel(
+    data: np.ndarray | SensorLog,
+    *,
+    g: float | None = None,
+    units: Units = "auto",
+    output_units: str | None = None,
+    solver: str = "lm1",
+    use: Literal["means", "samples"] = "means",
+    sample_rate: float | None = None,
+    window: int | None = None,
+    threshold: float | None = None,
+    threshold_factor: float = 6.0,
+    min_duration: float | None = None,
+    min_samples: int | None = None,
+    solver_options: dict | None = None,
+    sensor_id: str | None = None,
+) -> AccelCalibration:
+    """Calibrate a triaxial accelerometer from a multi-position log (paper 1).
+
+    Parameters
+    ----------
+    data : (N, 3) array or SensorLog
+        Raw readings (any unit) or a loaded log (its ``acc`` and ``sample_rate`` are used).
+    g : float, optional
+        Reference magnitude in output units. Default: 1 for g and counts (output in g),
+        9.80665 for m/s^2.
+    units : {"auto", "counts", "g", "m/s^2"}
+        Input units; "auto" decides from the static norm (0.3-3: g, 3-30: m/s^2, above: counts).
+        A declared unit that contradicts the data is an error.
+    output_units : str, optional
+        Label of the calibrated output; default the input unit, or "g" for counts. Give it with
+        ``g`` when calibrating counts to m/s^2 (``g=9.81744, output_units="m/s^2"``).
+    solver : {"lm1", "lm2", "lm3", "optimistix"}
+        Gavin LM update type 1-3, or optimistix's LevenbergMarquardt.
+    use : {"means", "samples"}
+        Fit the static-interval means (each pose weighs the same; default) or every static
+        sample (paper 1's choice; long rests weigh more).
+    sample_rate, window, threshold, threshold_factor, min_duration, min_samples
+        Static detection, see :func:`calib_jax.static.detect_static`.
+    solver_options : dict, optional
+        Passed to the solver (e.g. ``{"jacobian": "broyden", "rho_form": "paper"}``).
+
+    Raises
+    ------
+    ValueError
+        With what to change, for input that cannot give a calibration: wrong shape, nothing
+        finite, no static interval, too few distinct poses, all poses in one plane, units that
+        contradict the data.
+    """
+    log_notes: list[str] = []
+    source = None
+    if isinstance(data, SensorLog):
+        if data.acc is None:
+            raise ValueError(f"{data.path}: no accelerometer columns (ax, ay, az); map them with --columns")
+        sample_rate = sample_rate or data.sample_rate
+        log_notes = list(data.notes)
+        source = data.path
+        x = np.asarray(data.acc, float)
+    else:
+        x = np.asarray(data, float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"accelerometer data must be (samples, 3), got shape {x.shape}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if use not in ("means", "samples"):
+        raise ValueError(f"use must be 'means' or 'samples', got {use!r}")
+    units = _UNIT_ALIASES.get(str(units).lower(), units) if units != "auto" else "auto"
+    if units not in ("auto", "counts", "g", "m/s^2"):
+        raise ValueError(f"units must be auto, counts, g or m/s^2, got {units!r}")
+    warn: list[str] = list(log_notes)
+
+    finite = np.all(np.isfinite(x), axis=1)
+    n_bad = int((~finite).sum())
+    if finite.sum() == 0:
+        raise ValueError("no finite accelerometer samples: every row has NaN or inf")
+    if n_bad:
+        warn.append(f"{n_bad} rows with NaN or inf were left out of the fit")
+    valid = finite.copy()
+    for ax, kind, v in _saturated(x[finite]):
+        hit = finite & (x[:, ax] == v)
+        valid &= ~hit
+        warn.append(
+            f"axis {'xyz'[ax]} is saturated at its {kind} ({v:g}, {int(hit.sum())} samples left "
+            "out): use a wider range setting or avoid poses that drive it to the limit"
+        )
+
+    report = detect_static(
+        x,
+        sample_rate=sample_rate,
+        window=window,
+        threshold=threshold,
+        threshold_factor=threshold_factor,
+        min_duration=min_duration,
+        min_samples=min_samples,
+        valid=valid,
+    )
+    if report.n_intervals == 0:
+        raise ValueError(
+            "no static interval found: hold each pose still for at least "
+            f"{report.min_samples} samples, or loosen the detector (--threshold-factor, "
+            "--min-static, --window)"
+        )
+    means = report.means()
+    pts = means if use == "means" else x[report.mask]
+
+    # units
+    c_s, r_s = sphere_fit(jnp.asarray(pts), jnp.ones(len(pts)))
+    c_s, r_s = np.asarray(c_s), float(r_s)
+    static_norm = float(np.median(np.linalg.norm(means, axis=1)))
+    detected = _units_from_norm(static_norm)
+    if units == "auto":
+        if detected is None:
+            raise ValueError(
+                f"the static norm is {static_norm:.3g}, which fits no known unit; pass units= "
+                "(--units counts|g|m/s^2)"
+            )
+        units = detected
+    elif detected != units:
+        raise ValueError(
+            f"units={units!r}, but the static readings have norm {static_norm:.4g}, which looks "
+            f"like {detected or 'no known unit'}; pass --units {detected or 'counts'} (or fix "
+            "the scaling of the log)"
+        )
+    if g is None:
+        g = G_STANDARD if units == "m/s^2" else 1.0
+    if g <= 0 or not np.isfinite(g):
+        raise ValueError(f"g must be a positive number, got {g}")
+    out_units = output_units or ("g" if units == "counts" else units)
+
+    # coverage
+    if not np.isfinite(r_s) or r_s <= 0:
+        c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
+    dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
+    n_distinct = distinct_directions(pts, c_s)
+    if n_distinct < MIN_DISTINCT_POSES:
+        raise ValueError(
+            f"only {n_distinct} distinct poses (10 degrees apart) among the {len(pts)} fit "
+            f"points; the nine-parameter model needs at least {MIN_DISTINCT_POSES} spread over "
+            "the sphere (paper 1 uses 48). Record more orientations, or include slow rotations "
+            "as quasi-static samples (use='samples' with a short window, e.g. --use samples "
+            "--window 10 --threshold-factor 20)"
+        )
+    plane_ev, normal, min_cos, hemi_axis = _coverage(dirs)
+    if plane_ev < 0.01:
+        raise ValueError(
+            f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
+            "gain and bias along that normal are unobservable. Add poses tilted out of the plane"
+        )
+    if min_cos > -0.05:
+        warn.append(
+            f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
+            "are correlated and poorly determined; add poses from the opposite side"
+        )
+
+    # normalise and fit
+    k = r_s
+    xn = (pts - c_s) / k
+    n = len(xn)
+    size = _bucket(n)
+    xpad = np.zeros((size, 3))
+    xpad[:n] = xn
+    xpad[n:] = xn[0]
+    wpad = np.zeros(size)
+    wpad[:n] = 1.0
+    opts = tuple(sorted((solver_options or {}).items()))
+    if jnp.zeros(()).dtype != jnp.float64:
+        _warnings.warn(
+            "jax_enable_x64 is off: calibrating in float32 loses ~1e-7 relative accuracy; "
+            "call jax.config.update('jax_enable_x64', True) first",
+            stacklevel=2,
+        )
+    res = _compiled(solver, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+    pn = np.asarray(res.params, float)
+    T = np.concatenate([np.full(6, k / g), np.full(3, k)])
+    params = pn * T
+    params[6:9] += c_s
+    cov_n = np.asarray(res.covariance, float)
+    cov = cov_n * np.outer(T, T)
+    stderr = np.asarray(res.stderr, float) * T
+    corr = np.asarray(res.correlation, float)
+    condition = float(res.condition)
+    solver_status = int(res.status)
+
+    # status
+    if solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED) or not np.all(np.isfinite(params)):
+        status = "failed"
+    elif not is_converged(solver_status):
+        status = "not_converged"
+    else:
+        status = "ok"
+    # stderr in units of g (normalised): gains and cross terms relative to k/g, bias to k
+    se_n = np.asarray(res.stderr, float)
+    poor = [PARAM_NAMES[i] for i in range(9) if not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR]
+    hi_corr = [
+        f"{PARAM_NAMES[i]}~{PARAM_NAMES[j]} ({corr[i, j]:+.4f})"
+        for i in range(9)
+        for j in range(i + 1, 9)
+        if abs(corr[i, j]) > 0.999
+    ]
+    if hi_corr:
+        warn.append("nearly collinear parameters: " + ", ".join(hi_corr))
+    if not np.isfinite(condition) or condition > POOR_CONDITION:
+        warn.append(f"the normal equations are ill-conditioned (condition {condition:.3g})")
+    if status == "ok" and (poor or not np.isfinite(condition) or condition > POOR_CONDITION):
+        status = "poorly_determined"
+        if poor:
+            warn.append(
+                "poorly determined (std. error above 1 % of g): " + ", ".join(poor)
+                + "; add poses that cover the sphere"
+            )
+
+    # errors before/after over interval means, noise floor from within-interval scatter
+    x_static = x[report.mask]
+    offset, scale = _nominal(x_static, units, g)
+    before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
+    cal = AccelCalibration(
+        params=params,
+        stderr=stderr,
+        covariance=cov,
+        correlation=corr,
+        condition=condition,
+        status=status,
+        input_units=units,
+        output_units=out_units,
+        g=float(g),
+        solver=solver,
+        solver_status=solver_status,
+        solver_message=status_message(solver_status),
+        iterations=int(res.iterations),
+        nfev=int(res.nfev),
+        use=use,
+        n_intervals=report.n_intervals,
+        n_points=n,
+        rms_before=float(np.sqrt(np.mean(before**2))),
+        rms_after=float("nan"),
+        noise_floor=float("nan"),
+        poorly_determined=poor,
+        warnings=warn,
+        sensor_id=sensor_id,
+        source=source,
+    )
+    after, floor = interval_errors(cal, x, report)
+    cal = cal.replace(rms_after=after, noise_floor=floor)
+    if status in ("failed", "not_converged"):
+        _warnings.warn(f"accelerometer calibration {status}: {cal.solver_message}", stacklevel=2)
+    return cal
+
+
+def interval_errors(cal: AccelCalibration, x: np.ndarray, report: StaticReport) -> tuple[float, float]:
+    """RMS over static intervals of (|mean corrected a| - g)/g, and its white-noise floor.
+
+    The floor is the same RMS expected from within-interval scatter alone: for each interval
+    the standard error of the mean of the corrected norm, std(|a|)/sqrt(n)/g.
+    """
+    errs, floors = [], []
+    for iv in report.intervals:
+        a = cal.apply(x[iv.start : iv.stop])
+        nrm = np.linalg.norm(a, axis=1)
+        errs.append(np.linalg.norm(a.mean(axis=0)) / cal.g - 1.0)
+        floors.append(nrm.std(ddof=1) / np.sqrt(len(nrm)) / cal.g)
+    return float(np.sqrt(np.mean(np.square(errs)))), float(np.sqrt(np.mean(np.square(floors))))

@@ -1,0 +1,231 @@
+"""A fitted accelerometer calibration: the record users keep, apply and save.
+
+Saved as versioned JSON (``format_version``), checked on load. Parameters are in input units
+(gains and non-orthogonality: input units per output unit; bias: input units), so the same
+file applies to new raw data from the same sensor: a = alpha^-1 (a' - beta).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .models.accel import PARAM_NAMES, AccelParams, correct
+
+FORMAT_VERSION = 1
+MODEL = "accel9"
+
+
+@dataclass(frozen=True)
+class AccelCalibration:
+    """Outcome of :func:`calib_jax.calibrate_accel`.
+
+    ``status`` is "ok", "poorly_determined" (converged, but some parameter is not pinned down
+    by the poses: see ``poorly_determined`` and ``warnings``), "not_converged" or "failed".
+    """
+
+    params: np.ndarray
+    """Paper 1's p = [alpha_x, alpha_y, alpha_z, S_xy, S_xz, S_yz, beta_x, beta_y, beta_z]."""
+    stderr: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    condition: float
+    status: str
+    input_units: str
+    output_units: str
+    g: float
+    """Reference magnitude, in output units."""
+    solver: str
+    solver_status: int
+    solver_message: str
+    iterations: int
+    nfev: int
+    use: str
+    """'means' (interval means) or 'samples' (all static samples)."""
+    n_intervals: int
+    n_points: int
+    """Points the fit used (interval means or samples)."""
+    rms_before: float
+    rms_after: float
+    noise_floor: float
+    poorly_determined: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    sensor_id: str | None = None
+    date: str = field(default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
+    source: str | None = None
+    model: str = MODEL
+    format_version: int = FORMAT_VERSION
+
+    # ---- use -------------------------------------------------------------------------------
+    @property
+    def success(self) -> bool:
+        return self.status in ("ok", "poorly_determined")
+
+    @property
+    def gains(self) -> np.ndarray:
+        return self.params[0:3]
+
+    @property
+    def nonorth(self) -> np.ndarray:
+        return self.params[3:6]
+
+    @property
+    def bias(self) -> np.ndarray:
+        return self.params[6:9]
+
+    def to_params(self) -> AccelParams:
+        """The parameters as a JAX pytree, for use inside jitted pipelines."""
+        return AccelParams.from_vector(jnp.asarray(self.params))
+
+    def apply(self, raw: np.ndarray) -> np.ndarray:
+        """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for (..., 3)."""
+        raw = np.asarray(raw, float)
+        if raw.shape[-1] != 3:
+            raise ValueError(f"raw must have 3 columns (x, y, z), got shape {raw.shape}")
+        return np.asarray(_apply(jnp.asarray(self.params), jnp.asarray(raw)))
+
+    # ---- report ----------------------------------------------------------------------------
+    def table(self) -> str:
+        """Paper 1 Table 1 layout: each parameter with its standard error."""
+        unit_g = f"{self.input_units}/{self.output_units}"
+        unit = {0: unit_g, 3: unit_g, 6: self.input_units}
+        lines = [f"{'parameter':<10} {'value':>14} {'std. error':>12}  unit"]
+        for i, name in enumerate(PARAM_NAMES):
+            u = unit[3 * (i // 3)]
+            lines.append(f"{name:<10} {self.params[i]:>14.6g} {self.stderr[i]:>12.3g}  {u}")
+        return "\n".join(lines)
+
+    def report(self) -> str:
+        """Table, error before and after, status and warnings, as printed by the CLI."""
+        out = [
+            self.table(),
+            "",
+            f"fit on {self.n_points} {self.use} from {self.n_intervals} static intervals; "
+            f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations, "
+            f"{self.nfev} evaluations)",
+            f"RMS of (|a| - g)/g over interval means: before {self.rms_before:.3e}, "
+            f"after {self.rms_after:.3e} (noise floor {self.noise_floor:.3e}); "
+            f"{self.rms_before / max(self.rms_after, 1e-300):.0f}x lower",
+            f"condition number {self.condition:.3g}; status: {self.status}",
+        ]
+        if self.poorly_determined:
+            out.append("poorly determined: " + ", ".join(self.poorly_determined))
+        out += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(out)
+
+    # ---- JSON ------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        p, s = self.params, self.stderr
+        d = {
+            "format_version": self.format_version,
+            "model": self.model,
+            "sensor_id": self.sensor_id,
+            "date": self.date,
+            "source": self.source,
+            "units": {"input": self.input_units, "output": self.output_units, "g": self.g},
+            "params": {"gains": p[0:3].tolist(), "nonorth": p[3:6].tolist(), "bias": p[6:9].tolist()},
+            "stderr": {"gains": s[0:3].tolist(), "nonorth": s[3:6].tolist(), "bias": s[6:9].tolist()},
+            "covariance": self.covariance.tolist(),
+            "correlation": self.correlation.tolist(),
+            "condition": self.condition,
+            "status": self.status,
+            "solver": self.solver,
+            "solver_status": self.solver_status,
+            "solver_message": self.solver_message,
+            "iterations": self.iterations,
+            "nfev": self.nfev,
+            "use": self.use,
+            "n_intervals": self.n_intervals,
+            "n_points": self.n_points,
+            "rms_before": self.rms_before,
+            "rms_after": self.rms_after,
+            "noise_floor": self.noise_floor,
+            "poorly_determined": list(self.poorly_determined),
+            "warnings": list(self.warnings),
+        }
+        # the JSON standard has no inf/nan: write them as strings, read back by float()
+        return _sanitize(d)
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> AccelCalibration:
+        version = d.get("format_version")
+        if version != FORMAT_VERSION:
+            raise ValueError(
+                f"calibration format_version {version!r} is not supported (this calib_jax "
+                f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
+            )
+        if d.get("model") != MODEL:
+            raise ValueError(f"not an accelerometer calibration: model is {d.get('model')!r}")
+
+        def vec(block):
+            return np.array(
+                [float(v) for k in ("gains", "nonorth", "bias") for v in block[k]], float
+            )
+
+        def mat(m):
+            return np.array([[float(v) for v in row] for row in m], float)
+
+        return cls(
+            params=vec(d["params"]),
+            stderr=vec(d["stderr"]),
+            covariance=mat(d["covariance"]),
+            correlation=mat(d["correlation"]),
+            condition=float(d["condition"]),
+            status=d["status"],
+            input_units=d["units"]["input"],
+            output_units=d["units"]["output"],
+            g=float(d["units"]["g"]),
+            solver=d["solver"],
+            solver_status=int(d["solver_status"]),
+            solver_message=d["solver_message"],
+            iterations=int(d["iterations"]),
+            nfev=int(d["nfev"]),
+            use=d["use"],
+            n_intervals=int(d["n_intervals"]),
+            n_points=int(d["n_points"]),
+            rms_before=float(d["rms_before"]),
+            rms_after=float(d["rms_after"]),
+            noise_floor=float(d["noise_floor"]),
+            poorly_determined=list(d.get("poorly_determined", [])),
+            warnings=list(d.get("warnings", [])),
+            sensor_id=d.get("sensor_id"),
+            date=d["date"],
+            source=d.get("source"),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> AccelCalibration:
+        try:
+            d = json.loads(Path(path).read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
+        return cls.from_dict(d)
+
+    def replace(self, **changes) -> AccelCalibration:
+        return AccelCalibration(**{**asdict(self), **changes})
+
+
+def _sanitize(o):
+    if isinstance(o, dict):
+        return {k: _sanitize(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_sanitize(v) for v in o]
+    if isinstance(o, np.generic):
+        o = o.item()
+    if isinstance(o, float) and not np.isfinite(o):
+        return str(o)  # 'nan', 'inf', '-inf'
+    return o
+
+
+@jax.jit
+def _apply(p, raw):
+    return correct(p, raw)
