@@ -401,6 +401,9 @@ def calibrate_accel(
         noise_floor=float("nan"),
         poorly_determined=poor,
         warnings=warn,
+        static_means=means,
+        nominal_offset=offset,
+        nominal_scale=scale,
         sensor_id=sensor_id,
         source=source,
     )

@@ -56,6 +56,11 @@ class AccelCalibration:
     noise_floor: float
     poorly_determined: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    static_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """Raw means of the static intervals (n_intervals, 3), input units."""
+    nominal_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    nominal_scale: float = 1.0
+    """The 'before' conversion (raw - nominal_offset) / nominal_scale, see calib_jax.accel."""
     sensor_id: str | None = None
     date: str = field(default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
     source: str | None = None
@@ -148,6 +153,8 @@ class AccelCalibration:
             "noise_floor": self.noise_floor,
             "poorly_determined": list(self.poorly_determined),
             "warnings": list(self.warnings),
+            "static_means": np.asarray(self.static_means).tolist(),
+            "nominal": {"offset": np.asarray(self.nominal_offset).tolist(), "scale": self.nominal_scale},
         }
         # the JSON standard has no inf/nan: write them as strings, read back by float()
         return _sanitize(d)
@@ -197,6 +204,9 @@ class AccelCalibration:
             noise_floor=float(d["noise_floor"]),
             poorly_determined=list(d.get("poorly_determined", [])),
             warnings=list(d.get("warnings", [])),
+            static_means=np.array(d.get("static_means", []), float).reshape(-1, 3),
+            nominal_offset=np.array(d.get("nominal", {}).get("offset", [0.0, 0.0, 0.0]), float),
+            nominal_scale=float(d.get("nominal", {}).get("scale", 1.0)),
             sensor_id=d.get("sensor_id"),
             date=d["date"],
             source=d.get("source"),
