@@ -25,6 +25,7 @@ import functools
 import warnings as _warnings
 from typing import Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -46,7 +47,6 @@ _UNIT_ALIASES = {"g": "g", "m/s^2": "m/s^2", "m/s2": "m/s^2", "mps2": "m/s^2", "
 # magnitude, exceeds this: 1 % of g is the accuracy paper 1 claims for the whole calibration.
 POOR_STDERR = 1e-2
 POOR_CONDITION = 1e8
-MIN_DISTINCT_POSES = 9
 
 
 # ---------------------------------------------------------------------------------------------
@@ -74,23 +74,55 @@ def _residual(p, data):
     return normalized_sphere_residual(p, x, 1.0)
 
 
+MODELS = {
+    "accel9": (True,) * 9,
+    # the six-element model (gains and biases, alpha diagonal): all that six-face data such as
+    # the Ferraris protocol can determine
+    "accel6": (True, True, True, False, False, False, True, True, True),
+}
+
+
 def fit_normalized(
-    x: jax.Array, w: jax.Array, solver: str = "lm1", **options
+    x: jax.Array, w: jax.Array, solver: str = "lm1", model: str = "accel9", **options
 ) -> LMResult:
     """Pure core: fit paper 1's model to unit-radius data x (N, 3) with weights w (N,).
 
-    Jittable and vmappable over sensors. ``solver`` and ``options`` are static.
+    Jittable and vmappable over sensors. ``solver``, ``model`` and ``options`` are static.
+    For ``model="accel6"`` the non-orthogonality terms are held at zero; the result still
+    has nine entries (zero standard error and covariance for the fixed ones).
     """
+    free = np.asarray(MODELS[model])
+    idx = np.flatnonzero(free)
     p0 = initial_guess(x, w)
+    p0 = jnp.where(jnp.asarray(free), p0, 0.0)
+
+    def embed(q):
+        return jnp.zeros(9, q.dtype).at[idx].set(q)
+
+    def residual(q, data):
+        return _residual(embed(q), data)
+
     if solver == "optimistix":
-        return optx_solve(_residual, p0, (x, w), weights=w, **options)
-    update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
-    return lm_solve(_residual, p0, (x, w), weights=w, update_type=update_type, **options)
+        res = optx_solve(residual, p0[idx], (x, w), weights=w, **options)
+    else:
+        update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
+        res = lm_solve(residual, p0[idx], (x, w), weights=w, update_type=update_type, **options)
+    if len(idx) == 9:
+        return res
+    full = np.zeros((9, len(idx)))
+    full[idx, np.arange(len(idx))] = 1.0
+    E = jnp.asarray(full, res.params.dtype)
+    corr = E @ res.correlation @ E.T + jnp.diag(jnp.asarray(~free, res.params.dtype))
+    return eqx.tree_at(
+        lambda r: (r.params, r.stderr, r.covariance, r.correlation),
+        res,
+        (embed(res.params), E @ res.stderr, E @ res.covariance @ E.T, corr),
+    )
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(solver: str, options: tuple) -> callable:
-    return jax.jit(functools.partial(fit_normalized, solver=solver, **dict(options)))
+def _compiled(solver: str, model: str, options: tuple) -> callable:
+    return jax.jit(functools.partial(fit_normalized, solver=solver, model=model, **dict(options)))
 
 
 def _bucket(n: int) -> int:
@@ -170,6 +202,7 @@ def calibrate_accel(
     units: Units = "auto",
     output_units: str | None = None,
     solver: str = "lm1",
+    model: Literal["accel9", "accel6"] = "accel9",
     use: Literal["means", "samples"] = "means",
     sample_rate: float | None = None,
     window: int | None = None,
@@ -197,6 +230,9 @@ def calibrate_accel(
         ``g`` when calibrating counts to m/s^2 (``g=9.81744, output_units="m/s^2"``).
     solver : {"lm1", "lm2", "lm3", "optimistix"}
         Gavin LM update type 1-3, or optimistix's LevenbergMarquardt.
+    model : {"accel9", "accel6"}
+        Paper 1's nine parameters, or six (gains and biases; non-orthogonality held at zero),
+        for six-face protocols that cannot determine the cross terms.
     use : {"means", "samples"}
         Fit the static-interval means (each pose weighs the same; default) or every static
         sample (paper 1's choice; long rests weigh more).
@@ -227,6 +263,8 @@ def calibrate_accel(
         raise ValueError(f"accelerometer data must be (samples, 3), got shape {x.shape}")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {tuple(MODELS)}, got {model!r}")
     if use not in ("means", "samples"):
         raise ValueError(f"use must be 'means' or 'samples', got {use!r}")
     units = _UNIT_ALIASES.get(str(units).lower(), units) if units != "auto" else "auto"
@@ -297,13 +335,20 @@ def calibrate_accel(
         c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
     dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
     n_distinct = distinct_directions(pts, c_s)
-    if n_distinct < MIN_DISTINCT_POSES:
+    n_free = int(sum(MODELS[model]))
+    if n_distinct < n_free:
+        hint = (
+            " With six faces (the Ferraris protocol) fit the six-parameter model instead "
+            "(model='accel6', --model accel6)."
+            if model == "accel9" and n_distinct >= 6
+            else ""
+        )
         raise ValueError(
             f"only {n_distinct} distinct poses (10 degrees apart) among the {len(pts)} fit "
-            f"points; the nine-parameter model needs at least {MIN_DISTINCT_POSES} spread over "
-            "the sphere (paper 1 uses 48). Record more orientations, or include slow rotations "
-            "as quasi-static samples (use='samples' with a short window, e.g. --use samples "
-            "--window 10 --threshold-factor 20)"
+            f"points; the {n_free}-parameter model needs at least {n_free} spread over the "
+            "sphere (paper 1 uses 48). Record more orientations, or include slow tilting "
+            "motion as quasi-static samples (use='samples' with a short window, e.g. --use "
+            "samples --window 10 --threshold-factor 20)." + hint
         )
     plane_ev, normal, min_cos, hemi_axis = _coverage(dirs)
     if plane_ev < 0.01:
@@ -315,6 +360,13 @@ def calibrate_accel(
         warn.append(
             f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
             "are correlated and poorly determined; add poses from the opposite side"
+        )
+
+    if len(pts) - n_free < 3:
+        warn.append(
+            f"{len(pts)} fit points for {n_free} parameters: almost no redundancy, so the "
+            "standard errors and the residual say little; fit the samples (use='samples') or "
+            "record more poses"
         )
 
     # normalise and fit
@@ -334,7 +386,7 @@ def calibrate_accel(
             "call jax.config.update('jax_enable_x64', True) first",
             stacklevel=2,
         )
-    res = _compiled(solver, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+    res = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
     pn = np.asarray(res.params, float)
     T = np.concatenate([np.full(6, k / g), np.full(3, k)])
     params = pn * T
@@ -355,12 +407,17 @@ def calibrate_accel(
         status = "ok"
     # stderr in units of g (normalised): gains and cross terms relative to k/g, bias to k
     se_n = np.asarray(res.stderr, float)
-    poor = [PARAM_NAMES[i] for i in range(9) if not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR]
+    free = np.asarray(MODELS[model])
+    poor = [
+        PARAM_NAMES[i]
+        for i in range(9)
+        if free[i] and (not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR)
+    ]
     hi_corr = [
         f"{PARAM_NAMES[i]}~{PARAM_NAMES[j]} ({corr[i, j]:+.4f})"
         for i in range(9)
         for j in range(i + 1, 9)
-        if abs(corr[i, j]) > 0.999
+        if free[i] and free[j] and abs(corr[i, j]) > 0.999
     ]
     if hi_corr:
         warn.append("nearly collinear parameters: " + ", ".join(hi_corr))
@@ -389,6 +446,7 @@ def calibrate_accel(
         output_units=out_units,
         g=float(g),
         solver=solver,
+        model=model,
         solver_status=solver_status,
         solver_message=status_message(solver_status),
         iterations=int(res.iterations),

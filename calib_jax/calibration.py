@@ -19,7 +19,7 @@ import numpy as np
 from .models.accel import PARAM_NAMES, AccelParams, correct
 
 FORMAT_VERSION = 1
-MODEL = "accel9"
+MODELS = ("accel9", "accel6")
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,8 @@ class AccelCalibration:
     sensor_id: str | None = None
     date: str = field(default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
     source: str | None = None
-    model: str = MODEL
+    model: str = "accel9"
+    """'accel9' (paper 1) or 'accel6' (non-orthogonality held at zero)."""
     format_version: int = FORMAT_VERSION
 
     # ---- use -------------------------------------------------------------------------------
@@ -98,7 +99,8 @@ class AccelCalibration:
     # ---- report ----------------------------------------------------------------------------
     def table(self) -> str:
         """Paper 1 Table 1 layout: each parameter with its standard error."""
-        unit_g = f"{self.input_units}/{self.output_units}"
+        same = self.input_units == self.output_units
+        unit_g = "1 (dimensionless)" if same else f"{self.input_units} per {self.output_units}"
         unit = {0: unit_g, 3: unit_g, 6: self.input_units}
         lines = [f"{'parameter':<10} {'value':>14} {'std. error':>12}  unit"]
         for i, name in enumerate(PARAM_NAMES):
@@ -170,7 +172,7 @@ class AccelCalibration:
                 f"calibration format_version {version!r} is not supported (this calib_jax "
                 f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
             )
-        if d.get("model") != MODEL:
+        if d.get("model") not in MODELS:
             raise ValueError(f"not an accelerometer calibration: model is {d.get('model')!r}")
 
         def vec(block):
@@ -210,6 +212,7 @@ class AccelCalibration:
             sensor_id=d.get("sensor_id"),
             date=d["date"],
             source=d.get("source"),
+            model=d["model"],
         )
 
     @classmethod

@@ -42,6 +42,7 @@ def run_accel(args: argparse.Namespace) -> int:
         units=args.units,
         output_units=args.out_units,
         solver=args.solver,
+        model=args.model,
         use=args.use,
         window=args.window,
         threshold_factor=args.threshold_factor,
@@ -96,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--units", default="auto", help="input units: auto, counts, g, m/s^2")
     a.add_argument("--out-units", default=None, help="label of the calibrated output (with --g)")
     a.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
+    a.add_argument("--model", default="accel9", choices=["accel9", "accel6"])
     a.add_argument("--use", default="means", choices=["means", "samples"])
     a.add_argument("--broyden", action="store_true", help="finite differences + Broyden (paper 1)")
     a.add_argument("--columns", default=None, help="e.g. t,ax,ay,az or ax=AccX,ay=AccY,az=AccZ")
