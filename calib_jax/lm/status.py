@@ -30,7 +30,7 @@ class Status(enum.IntEnum):
     """An external solver reported a failure other than the budget."""
     CONVERGED_ROUNDOFF = 8
     """A step was rejected because neither the actual nor the predicted change of chi2 rose
-    above round-off (16 eps chi2): the fit is at the optimum to machine precision, though the
+    above round-off (4 sqrt(m) eps chi2): the fit is at the optimum to machine precision, though the
     absolute tests 1-3 did not trigger (typical with many samples, where the gradient at the
     optimum is dominated by round-off)."""
 

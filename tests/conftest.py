@@ -1,0 +1,66 @@
+"""Shared set-up: float64 on, shared data, tolerances in one place (each with its reason)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile(
+    "ci",
+    max_examples=12,
+    deadline=None,  # the first example pays the JAX compile
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.load_profile("ci")
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+class Tol:
+    """Tolerances, each with the reason it has this size."""
+
+    # Solvers that all reach the same minimum of a smooth float64 problem agree on chi2 to a few
+    # ulps of accumulated round-off over thousands of terms.
+    CHI2_REL = 1e-9
+    # Parameters at the minimum are determined to ~sqrt(eps * cond); with cond ~ 10-100 for
+    # well-posed 48-pose data that is ~1e-7 relative in the worst case; observed ~1e-10.
+    PARAM_REL = 1e-7
+    # Central finite differences with step h ~ 1e-6 have truncation error O(h^2 f''') ~ 1e-10
+    # and round-off O(eps / h) ~ 1e-10 on O(1) residuals.
+    FD_ABS = 1e-7
+    # Parameter recovery: estimates should lie within a few standard errors of the truth
+    # (5 sigma: a false alarm rate of ~6e-7 per parameter).
+    N_SIGMA = 5.0
+
+
+@pytest.fixture(scope="session")
+def tol() -> type[Tol]:
+    return Tol
+
+
+def shared_file(rel: str) -> Path:
+    path = SHARED_DATA / rel
+    if not path.exists():
+        pytest.skip(f"shared data not present: {path}")
+    return path
+
+
+@pytest.fixture(scope="session")
+def sim48():
+    """A 48-pose simulated log with known truth (input units = g, noise 2 mg)."""
+    from calib_jax.simulate import random_params, simulate_accel
+
+    p = random_params(7, gain_spread=0.05, nonorth_spread=0.02, bias_spread=0.05)
+    return simulate_accel(p, samples_per_pose=60, transition_samples=40, noise=2e-3, rng=7)
+
+
+@pytest.fixture(scope="session")
+def rng():
+    return np.random.default_rng(1234)
