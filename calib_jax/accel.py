@@ -176,15 +176,18 @@ def _nominal(x_static: np.ndarray, units: str, g: float) -> tuple[np.ndarray, fl
     return offset, scale
 
 
-def _coverage(dirs: np.ndarray) -> tuple[float, np.ndarray, float, np.ndarray]:
-    """Smallest eigenvalue of the direction scatter (0 = a plane) and its normal; the
-    smallest cosine to the mean direction (> 0 = one hemisphere) and that direction."""
-    S = dirs.T @ dirs / len(dirs)
-    evals, evecs = np.linalg.eigh(S)
+def _coverage(pts: np.ndarray, dirs: np.ndarray) -> tuple[float, np.ndarray, float, np.ndarray]:
+    """Flatness of the fit points (smallest / largest eigenvalue of their covariance: 0 = all
+    in one plane) and the plane's normal; the smallest cosine of the directions to their mean
+    direction (> 0 = one hemisphere) and that direction. The plane test uses the points, not
+    directions from a fitted centre: a sphere fit to coplanar points puts the centre anywhere
+    along the normal."""
+    evals, evecs = np.linalg.eigh(np.cov(pts.T))
+    flat = float(evals[0] / evals[2]) if evals[2] > 0 else 0.0
     mean = dirs.mean(axis=0)
     mn = np.linalg.norm(mean)
     axis = mean / mn if mn > 0 else np.array([0.0, 0.0, 1.0])
-    return float(evals[0]), evecs[:, 0], float(np.min(dirs @ axis)), axis
+    return flat, evecs[:, 0], float(np.min(dirs @ axis)), axis
 
 
 def _vec(v: np.ndarray) -> str:
@@ -350,8 +353,8 @@ def calibrate_accel(
             "motion as quasi-static samples (use='samples' with a short window, e.g. --use "
             "samples --window 10 --threshold-factor 20)." + hint
         )
-    plane_ev, normal, min_cos, hemi_axis = _coverage(dirs)
-    if plane_ev < 0.01:
+    flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
+    if flatness < 1e-3:
         raise ValueError(
             f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
             "gain and bias along that normal are unobservable. Add poses tilted out of the plane"

@@ -309,8 +309,10 @@ def lm_solve(
         # round-off of a sum of m squares: a few sqrt(m) eps relative
         tiny_chi2 = 4.0 * jnp.sqrt(dof + n) * jnp.finfo(dtype).eps * c.chi2
         small_step = started & (jnp.max(jnp.abs(h) / (jnp.abs(p) + 1e-12)) < eps2)
+        # not gated on an accepted step: a start already at the optimum (the algebraic
+        # ellipsoid start often is, to round-off) would otherwise reject until the budget
         roundoff = (
-            started & ~accept & h_ok & (jnp.abs(c.chi2 - chi2_try) <= tiny_chi2) & (pred <= tiny_chi2)
+            ~accept & h_ok & (jnp.abs(c.chi2 - chi2_try) <= tiny_chi2) & (pred <= tiny_chi2)
         )
         if jacobian == "exact":
             J = jax.lax.cond(accept, lambda: jac_exact(p_try), lambda: c.J)

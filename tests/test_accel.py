@@ -1,0 +1,191 @@
+"""calibrate_accel end to end on simulated logs with known truth, and every bad input."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import calib_jax as cj
+from calib_jax.simulate import paper48_directions, random_directions, random_params, simulate_accel
+
+# detector settings for the short simulated poses (100 samples at 100 Hz)
+DET = dict(sample_rate=100.0, window=25, min_samples=40)
+
+
+def sim(seed=0, dirs=None, noise=2e-3, scale=1.0, quantize=False, **kw):
+    p = random_params(seed, scale=scale)
+    return simulate_accel(
+        p, dirs, samples_per_pose=100, transition_samples=30, noise=noise * scale,
+        quantize=quantize, rng=seed, **kw,
+    )
+
+
+@given(
+    seed=st.integers(0, 10_000),
+    noise=st.sampled_from([5e-4, 2e-3, 5e-3]),
+    poses=st.sampled_from(["paper48", "random30", "random60"]),
+    unit=st.sampled_from(["g", "m/s^2", "counts"]),
+)
+def test_parameter_recovery(seed, noise, poses, unit, tol):
+    dirs = {
+        "paper48": paper48_directions(),
+        "random30": random_directions(30, seed),
+        "random60": random_directions(60, seed),
+    }[poses]
+    scale, g, quant = {"g": (1.0, 1.0, False), "m/s^2": (9.80665, 9.80665, False),
+                       "counts": (4096.0, 1.0, True)}[unit]
+    # the simulator's reference magnitude is g in output units: readings = alpha (g u) + beta
+    log = simulate_accel(
+        random_params(seed, scale=scale / g), dirs, samples_per_pose=100, transition_samples=30,
+        noise=noise * scale, quantize=quant, g=g, rng=seed,
+    )
+    cal = cj.calibrate_accel(log.raw, units=unit, g=g, **DET)
+    assert cal.status == "ok", cal.report()
+    assert cal.n_intervals == len(dirs)
+    z = (cal.params - log.params) / cal.stderr
+    assert np.all(np.abs(z) < tol.N_SIGMA), (z, cal.report())
+    assert cal.rms_after < cal.rms_before
+
+
+def test_static_detection_finds_every_pose():
+    log = sim(1)
+    rep = cj.detect_static(log.raw, **DET)
+    assert rep.n_intervals == len(log.directions)
+    for iv in rep.intervals:
+        poses = log.pose[iv.start : iv.stop]
+        assert np.all(poses == poses[0]) and poses[0] >= 0  # never straddles a transition
+    assert "48 static intervals" in rep.summary(100.0)
+
+
+def test_means_and_samples_both_available(tol):
+    log = sim(2)
+    a = cj.calibrate_accel(log.raw, use="means", **DET)
+    b = cj.calibrate_accel(log.raw, use="samples", **DET)
+    assert a.n_points == 48 and b.n_points > 40 * 48
+    for cal in (a, b):
+        assert np.all(np.abs(cal.params - log.params) < tol.N_SIGMA * cal.stderr)
+
+
+def test_json_roundtrip_and_apply(tmp_path):
+    log = sim(3)
+    cal = cj.calibrate_accel(log.raw, sensor_id="unit-7", **DET)
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    d = json.loads(path.read_text())
+    assert d["format_version"] == 1 and d["params"]["gains"] and d["units"]["input"] == "g"
+    back = cj.AccelCalibration.load(path)
+    np.testing.assert_array_equal(back.params, cal.params)
+    np.testing.assert_array_equal(back.stderr, cal.stderr)
+    assert back.sensor_id == "unit-7" and back.status == cal.status
+    a = back.apply(log.raw[log.static])
+    err = np.abs(np.linalg.norm(a, axis=1) - 1.0)
+    assert np.median(err) < 5e-3  # per-sample noise is 2 mg
+    d["format_version"] = 99
+    path.write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="format_version"):
+        cj.AccelCalibration.load(path)
+
+
+# ---- bad input --------------------------------------------------------------------------------
+
+
+def test_nan_rows_are_dropped_and_reported(tol):
+    log = sim(4)
+    raw = log.raw.copy()
+    raw[[5, 500, 1200]] = np.nan
+    raw[800, 1] = np.inf
+    ref = cj.calibrate_accel(log.raw, **DET)
+    cal = cj.calibrate_accel(raw, **DET)
+    assert any("4 rows with NaN or inf" in w for w in cal.warnings)
+    # a NaN row inside a pose splits its interval (the pose then counts twice among the means),
+    # so the estimate moves a little, well within its uncertainty
+    assert np.all(np.abs(cal.params - ref.params) < 0.5 * ref.stderr)
+
+
+def test_all_nan_is_an_error():
+    with pytest.raises(ValueError, match="no finite"):
+        cj.calibrate_accel(np.full((100, 3), np.nan))
+
+
+def test_wrong_shape_is_an_error():
+    with pytest.raises(ValueError, match=r"\(samples, 3\)"):
+        cj.calibrate_accel(np.zeros((100, 2)))
+
+
+def test_too_few_poses_says_what_to_do():
+    faces = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]])
+    log = sim(5, faces)
+    with pytest.raises(ValueError, match="only 6 distinct poses.*accel6"):
+        cj.calibrate_accel(log.raw, **DET)
+    cal = cj.calibrate_accel(log.raw, model="accel6", use="samples", **DET)
+    assert cal.status == "ok" and np.all(cal.nonorth == 0)
+
+
+def test_all_poses_in_one_plane_is_an_error():
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)], axis=1)
+    with pytest.raises(ValueError, match="one plane"):
+        cj.calibrate_accel(sim(6, dirs).raw, **DET)
+
+
+def test_one_hemisphere_is_flagged():
+    d = random_directions(200, 8)
+    d = d[d[:, 2] > 0.3][:30]
+    cal = cj.calibrate_accel(sim(8, d).raw, **DET)
+    assert any("hemisphere" in w for w in cal.warnings)
+    # the z gain and bias trade off: their correlation is strong and reported
+    i, j = 2, 8
+    assert abs(cal.correlation[i, j]) > 0.9
+
+
+def test_saturated_axis_is_excluded_and_reported():
+    log = sim(9)
+    raw = log.raw.copy()
+    top = np.quantile(raw[:, 0], 0.97)
+    raw[:, 0] = np.minimum(raw[:, 0], top)
+    cal = cj.calibrate_accel(raw, **DET)
+    assert any("axis x is saturated" in w for w in cal.warnings)
+
+
+def test_no_static_interval_is_an_error():
+    rng = np.random.default_rng(0)
+    walk = np.cumsum(rng.normal(scale=0.05, size=(3000, 3)), axis=0)
+    with pytest.raises(ValueError, match="no static interval"):
+        cj.calibrate_accel(walk, threshold=1e-12, **DET)
+
+
+def test_wrong_units_are_caught():
+    log = simulate_accel(random_params(10, scale=9.80665), g=9.80665 / 9.80665 * 1.0,
+                         samples_per_pose=100, transition_samples=30, noise=0.01, rng=10)
+    with pytest.raises(ValueError, match="looks like m/s\\^2"):
+        cj.calibrate_accel(log.raw, units="g", **DET)
+    with pytest.raises(ValueError, match="units must be"):
+        cj.calibrate_accel(log.raw, units="furlongs", **DET)
+
+
+def test_failed_fit_is_never_a_silent_identity():
+    log = sim(11)
+    with pytest.warns(UserWarning, match="not_converged"):
+        cal = cj.calibrate_accel(log.raw, solver_options={"max_iter": 1}, **DET)
+    assert cal.status == "not_converged" and not cal.success
+    assert "iteration budget" in cal.solver_message
+
+
+def test_float32_warns():
+    import jax
+
+    log = sim(12)
+    jax.config.update("jax_enable_x64", False)
+    try:
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            try:
+                cj.calibrate_accel(log.raw, **DET)
+            except Exception:
+                pass
+        assert any("float32" in str(r.message) for r in rec)
+    finally:
+        jax.config.update("jax_enable_x64", True)
