@@ -1,0 +1,92 @@
+"""Regression on real measured logs in ../shared/data (each folder's NOTES.md says what it is)."""
+
+import json
+
+import numpy as np
+import pytest
+
+import calib_jax as cj
+from calib_jax.cli import demo_log_path
+
+from .conftest import shared_file
+
+
+@pytest.fixture(scope="module")
+def xsens():
+    # the copy shipped in the package (identical to ../shared/data/imutk_xsens)
+    return cj.load_log(demo_log_path())
+
+
+@pytest.fixture(scope="module")
+def xsens_cal(xsens):
+    return cj.calibrate_accel(xsens, g=9.81744, output_units="m/s^2")
+
+
+def test_xsens_error_falls_more_than_tenfold(xsens_cal):
+    cal = xsens_cal
+    assert cal.status == "ok", cal.report()
+    assert cal.input_units == "counts"
+    assert 36 <= cal.n_intervals <= 40  # NOTES.md: ~38 static windows with a 1 s moving std
+    assert cal.rms_before / cal.rms_after > 10  # the issue's requirement (measured: ~1200x)
+    # NOTES.md's independent nine-parameter fit: RMS residual 0.010 % of g
+    assert cal.rms_after < 2e-4
+    # NOTES.md: gains ~2.41e-3 m/s^2 per count (415 counts per m/s^2), biases ~(33124, 33275, 32364)
+    np.testing.assert_allclose(cal.gains, 415.0, rtol=0.01)
+    np.testing.assert_allclose(cal.bias, [33124, 33275, 32364], atol=2.0)
+    # the residual is above the white noise floor (unmodelled effects: issue 6), not below it
+    assert cal.noise_floor < cal.rms_after
+
+
+@pytest.mark.parametrize("solver", ["lm2", "lm3", "optimistix"])
+def test_xsens_solvers_agree(xsens, xsens_cal, solver):
+    cal = cj.calibrate_accel(xsens, g=9.81744, output_units="m/s^2", solver=solver)
+    assert cal.status == "ok"
+    # same minimum: parameters agree far inside their standard errors
+    assert np.all(np.abs(cal.params - xsens_cal.params) < 1e-4 * xsens_cal.stderr)
+
+
+def test_xsens_from_shared_data_matches_shipped_copy():
+    path = shared_file("imutk_xsens/xsens_acc.mat")
+    assert path.read_bytes() == demo_log_path().read_bytes()
+
+
+def test_imucal_annotated_session_matches_published_reference():
+    # imucal's Ferraris reference (example_cal.json): acc = R^-1 K^-1 (raw - b). Six faces fix
+    # gains and biases only, so compare the six-parameter model with K's diagonal and b.
+    log = cj.load_log(shared_file("imucal_ferraris/annotated_session.csv"), sample_rate=204.8)
+    ref = json.loads(shared_file("imucal_ferraris/example_cal.json").read_text())
+    K, R, b = (np.array(ref[k]) for k in ("K_a", "R_a", "b_a"))
+    cal = cj.calibrate_accel(log, model="accel6", use="samples", g=9.81, output_units="m/s^2")
+    assert cal.status == "ok" and cal.n_intervals == 6
+    # imucal's R_a has cross terms of 0.7-2.4 %, which our diagonal model cannot hold: the
+    # gains then agree to a few 1e-4 and the biases to a fraction of a count (1 count ~ 0.5 %
+    # of g/100). Measured: gains 3e-4, biases 0.02 / 0.10 / 0.60 counts.
+    np.testing.assert_allclose(cal.gains, np.diag(K), rtol=1e-3)
+    np.testing.assert_allclose(cal.bias, b, atol=1.0)
+    # both calibrations put every face on the same sphere to within 0.05 % of g
+    ours = np.linalg.norm(cal.apply(cal.static_means), axis=1)
+    theirs = np.linalg.norm(np.linalg.solve(K @ R, (cal.static_means - b).T).T, axis=1)
+    np.testing.assert_allclose(ours, theirs, atol=0.005)
+
+
+def test_imucal_session_in_physical_units():
+    log = cj.load_log(shared_file("imucal_ferraris/example_ferraris_session.csv"), sample_rate=102.4)
+    with pytest.raises(ValueError, match="accel6"):
+        cj.calibrate_accel(log)  # six faces cannot fix nine parameters: a clear error
+    cal = cj.calibrate_accel(log, model="accel6")
+    assert cal.input_units == "m/s^2" and cal.status == "ok"
+    # NOTES.md's independent fit: bias (0.535, -0.617, 0.398) m/s^2, inverse gains
+    # (1.0036, 0.9975, 0.9768); its fit also had cross terms, hence 1e-3 / 5 mm/s^2
+    np.testing.assert_allclose(cal.bias, [0.535, -0.617, 0.398], atol=5e-3)
+    np.testing.assert_allclose(1 / cal.gains, [1.0036, 0.9975, 0.9768], atol=2e-3)
+    assert cal.rms_before / cal.rms_after > 10
+
+
+def test_ckexplorer_tumble_in_g():
+    log = cj.load_log(shared_file("ckexplorer_accmag/acc_log.csv"))
+    cal = cj.calibrate_accel(log, use="samples")
+    assert cal.input_units == "g" and cal.success
+    # NOTES.md: a partly pre-calibrated sensor (gains ~1.0025, biases within 0.02 g)
+    np.testing.assert_allclose(cal.gains, 1.0, atol=0.02)
+    assert np.all(np.abs(cal.bias) < 0.03)
+    assert cal.rms_after < cal.rms_before
