@@ -12,6 +12,7 @@ Public API (re-exports only; each concept lives in its own module):
 
 from .accel import calibrate_accel, fit_normalized, initial_guess
 from .calibration import AccelCalibration
+from .datasets import demo_log_path
 from .io import SensorLog, load_log
 from .lm import LMResult, Status, lm_solve, optx_solve
 from .models.accel import AccelParams, correct, distort, sphere_residual
@@ -28,6 +29,7 @@ __all__ = [
     "Status",
     "calibrate_accel",
     "correct",
+    "demo_log_path",
     "detect_static",
     "distort",
     "fit_normalized",

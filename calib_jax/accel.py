@@ -40,8 +40,18 @@ from .static import StaticReport, detect_static, distinct_directions
 G_STANDARD = 9.80665
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
 Units = Literal["auto", "counts", "g", "m/s^2"]
-_UNIT_ALIASES = {"g": "g", "m/s^2": "m/s^2", "m/s2": "m/s^2", "mps2": "m/s^2", "counts": "counts",
-                 "count": "counts", "raw": "counts", "lsb": "counts", "a.u.": "counts", "au": "counts"}
+_UNIT_ALIASES = {
+    "g": "g",
+    "m/s^2": "m/s^2",
+    "m/s2": "m/s^2",
+    "mps2": "m/s^2",
+    "counts": "counts",
+    "count": "counts",
+    "raw": "counts",
+    "lsb": "counts",
+    "a.u.": "counts",
+    "au": "counts",
+}
 
 # A parameter is "poorly determined" when its standard error, in units of the reference
 # magnitude, exceeds this: 1 % of g is the accuracy paper 1 claims for the whole calibration.
@@ -143,7 +153,9 @@ def _units_from_norm(norm: float) -> str | None:
     return None
 
 
-def _saturated(x: np.ndarray, min_count: int = 20, min_fraction: float = 0.005) -> list[tuple[int, str, float]]:
+def _saturated(
+    x: np.ndarray, min_count: int = 20, min_fraction: float = 0.005
+) -> list[tuple[int, str, float]]:
     """Axes whose extreme value is held by many samples: (axis, 'max'|'min', value)."""
     out = []
     n = len(x)
@@ -255,7 +267,9 @@ def calibrate_accel(
     source = None
     if isinstance(data, SensorLog):
         if data.acc is None:
-            raise ValueError(f"{data.path}: no accelerometer columns (ax, ay, az); map them with --columns")
+            raise ValueError(
+                f"{data.path}: no accelerometer columns (ax, ay, az); map them with --columns"
+            )
         sample_rate = sample_rate or data.sample_rate
         log_notes = list(data.notes)
         source = data.path
@@ -402,7 +416,9 @@ def calibrate_accel(
     solver_status = int(res.status)
 
     # status
-    if solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED) or not np.all(np.isfinite(params)):
+    if solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED) or not np.all(
+        np.isfinite(params)
+    ):
         status = "failed"
     elif not is_converged(solver_status):
         status = "not_converged"
@@ -430,7 +446,8 @@ def calibrate_accel(
         status = "poorly_determined"
         if poor:
             warn.append(
-                "poorly determined (std. error above 1 % of g): " + ", ".join(poor)
+                "poorly determined (std. error above 1 % of g): "
+                + ", ".join(poor)
                 + "; add poses that cover the sphere"
             )
 
@@ -475,7 +492,9 @@ def calibrate_accel(
     return cal
 
 
-def interval_errors(cal: AccelCalibration, x: np.ndarray, report: StaticReport) -> tuple[float, float]:
+def interval_errors(
+    cal: AccelCalibration, x: np.ndarray, report: StaticReport
+) -> tuple[float, float]:
     """RMS over static intervals of (|mean corrected a| - g)/g, and its white-noise floor.
 
     The floor is the same RMS expected from within-interval scatter alone: for each interval

@@ -62,7 +62,9 @@ class AccelCalibration:
     nominal_scale: float = 1.0
     """The 'before' conversion (raw - nominal_offset) / nominal_scale, see calib_jax.accel."""
     sensor_id: str | None = None
-    date: str = field(default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
+    date: str = field(
+        default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    )
     source: str | None = None
     model: str = "accel9"
     """'accel9' (paper 1) or 'accel6' (non-orthogonality held at zero)."""
@@ -136,8 +138,16 @@ class AccelCalibration:
             "date": self.date,
             "source": self.source,
             "units": {"input": self.input_units, "output": self.output_units, "g": self.g},
-            "params": {"gains": p[0:3].tolist(), "nonorth": p[3:6].tolist(), "bias": p[6:9].tolist()},
-            "stderr": {"gains": s[0:3].tolist(), "nonorth": s[3:6].tolist(), "bias": s[6:9].tolist()},
+            "params": {
+                "gains": p[0:3].tolist(),
+                "nonorth": p[3:6].tolist(),
+                "bias": p[6:9].tolist(),
+            },
+            "stderr": {
+                "gains": s[0:3].tolist(),
+                "nonorth": s[3:6].tolist(),
+                "bias": s[6:9].tolist(),
+            },
             "covariance": self.covariance.tolist(),
             "correlation": self.correlation.tolist(),
             "condition": self.condition,
@@ -156,7 +166,10 @@ class AccelCalibration:
             "poorly_determined": list(self.poorly_determined),
             "warnings": list(self.warnings),
             "static_means": np.asarray(self.static_means).tolist(),
-            "nominal": {"offset": np.asarray(self.nominal_offset).tolist(), "scale": self.nominal_scale},
+            "nominal": {
+                "offset": np.asarray(self.nominal_offset).tolist(),
+                "scale": self.nominal_scale,
+            },
         }
         # the JSON standard has no inf/nan: write them as strings, read back by float()
         return _sanitize(d)

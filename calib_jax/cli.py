@@ -4,21 +4,15 @@ from __future__ import annotations
 
 import argparse
 import sys
-from importlib import resources
 from pathlib import Path
 
-import numpy as np
+from .datasets import demo_log_path
 
 
 def _enable_x64() -> None:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-
-
-def demo_log_path() -> Path:
-    """The imu_tk Xsens log shipped with the package (see its NOTES.md)."""
-    return Path(str(resources.files("calib_jax") / "data" / "imutk_xsens" / "xsens_acc.mat"))
 
 
 def _json_out(cal, path: str | None) -> None:
@@ -34,7 +28,10 @@ def run_accel(args: argparse.Namespace) -> int:
 
     log = load_log(args.file, columns=args.columns, sample_rate=args.sample_rate)
     if log.acc is None:
-        print(f"error: {args.file} has no accelerometer columns; map them with --columns", file=sys.stderr)
+        print(
+            f"error: {args.file} has no accelerometer columns; map them with --columns",
+            file=sys.stderr,
+        )
         return 2
     cal = calibrate_accel(
         log,
@@ -104,7 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--sample-rate", type=float, default=None, help="Hz, if the log has no time")
     a.add_argument("--window", type=int, default=None, help="moving-variance window (samples)")
     a.add_argument("--threshold-factor", type=float, default=6.0)
-    a.add_argument("--min-static", type=float, default=None, help="shortest pose (s, or samples without a rate)")
+    a.add_argument(
+        "--min-static",
+        type=float,
+        default=None,
+        help="shortest pose (s, or samples without a rate)",
+    )
     a.add_argument("--sensor-id", default=None)
     a.add_argument("--json", default=None, help="write the calibration JSON here")
     a.add_argument("--plot", default=None, help="write a PNG figure here")

@@ -35,9 +35,7 @@ def ellipsoid_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array, jax
     D = jnp.stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, X, Y, Z], axis=1)
     Dw = D * w[:, None]
     u = cho_solve_small(Dw.T @ D, Dw.T @ jnp.ones_like(X))
-    A = jnp.array(
-        [[u[0], u[3], u[4]], [u[3], u[1], u[5]], [u[4], u[5], u[2]]]
-    )
+    A = jnp.array([[u[0], u[3], u[4]], [u[3], u[1], u[5]], [u[4], u[5], u[2]]])
     v = u[6:9]
     evals, evecs = eigh_small(A)
     pd = jnp.all(evals > 0) & jnp.all(jnp.isfinite(u))

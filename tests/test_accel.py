@@ -18,8 +18,14 @@ DET = dict(sample_rate=100.0, window=25, min_samples=40)
 def sim(seed=0, dirs=None, noise=2e-3, scale=1.0, quantize=False, **kw):
     p = random_params(seed, scale=scale)
     return simulate_accel(
-        p, dirs, samples_per_pose=100, transition_samples=30, noise=noise * scale,
-        quantize=quantize, rng=seed, **kw,
+        p,
+        dirs,
+        samples_per_pose=100,
+        transition_samples=30,
+        noise=noise * scale,
+        quantize=quantize,
+        rng=seed,
+        **kw,
     )
 
 
@@ -35,12 +41,21 @@ def test_parameter_recovery(seed, noise, poses, unit, tol):
         "random30": random_directions(30, seed),
         "random60": random_directions(60, seed),
     }[poses]
-    scale, g, quant = {"g": (1.0, 1.0, False), "m/s^2": (9.80665, 9.80665, False),
-                       "counts": (4096.0, 1.0, True)}[unit]
+    scale, g, quant = {
+        "g": (1.0, 1.0, False),
+        "m/s^2": (9.80665, 9.80665, False),
+        "counts": (4096.0, 1.0, True),
+    }[unit]
     # the simulator's reference magnitude is g in output units: readings = alpha (g u) + beta
     log = simulate_accel(
-        random_params(seed, scale=scale / g), dirs, samples_per_pose=100, transition_samples=30,
-        noise=noise * scale, quantize=quant, g=g, rng=seed,
+        random_params(seed, scale=scale / g),
+        dirs,
+        samples_per_pose=100,
+        transition_samples=30,
+        noise=noise * scale,
+        quantize=quant,
+        g=g,
+        rng=seed,
     )
     cal = cj.calibrate_accel(log.raw, units=unit, g=g, **DET)
     assert cal.status == "ok", cal.report()
@@ -158,8 +173,14 @@ def test_no_static_interval_is_an_error():
 
 
 def test_wrong_units_are_caught():
-    log = simulate_accel(random_params(10, scale=9.80665), g=9.80665 / 9.80665 * 1.0,
-                         samples_per_pose=100, transition_samples=30, noise=0.01, rng=10)
+    log = simulate_accel(
+        random_params(10, scale=9.80665),
+        g=9.80665 / 9.80665 * 1.0,
+        samples_per_pose=100,
+        transition_samples=30,
+        noise=0.01,
+        rng=10,
+    )
     with pytest.raises(ValueError, match="looks like m/s\\^2"):
         cj.calibrate_accel(log.raw, units="g", **DET)
     with pytest.raises(ValueError, match="units must be"):

@@ -12,14 +12,35 @@ from .conftest import shared_file
 def test_accel_writes_the_documented_json(tmp_path, capsys):
     out = tmp_path / "cal.json"
     png = tmp_path / "cal.png"
-    rc = main(["accel", str(demo_log_path()), "--g", "9.81744", "--out-units", "m/s^2",
-               "--json", str(out), "--plot", str(png)])
+    rc = main(
+        [
+            "accel",
+            str(demo_log_path()),
+            "--g",
+            "9.81744",
+            "--out-units",
+            "m/s^2",
+            "--json",
+            str(out),
+            "--plot",
+            str(png),
+        ]
+    )
     assert rc == 0
     text = capsys.readouterr().out
     assert "alpha_x" in text and "beta_z" in text and "std. error" in text and "before" in text
     d = json.loads(out.read_text())
-    for key in ("params", "stderr", "status", "iterations", "n_intervals", "units",
-                "rms_before", "rms_after", "noise_floor"):
+    for key in (
+        "params",
+        "stderr",
+        "status",
+        "iterations",
+        "n_intervals",
+        "units",
+        "rms_before",
+        "rms_after",
+        "noise_floor",
+    ):
         assert key in d, key
     assert set(d["params"]) == {"gains", "nonorth", "bias"}
     assert all(len(v) == 3 for v in d["params"].values())

@@ -19,11 +19,16 @@ def sphere(p, x):
     return normalized_sphere_residual(p, x, 1.0)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def gavin(update_type, jacobian, rho_form, history=False):
     return jax.jit(
         lambda p0, x: lm_solve(
-            sphere, p0, x, update_type=update_type, jacobian=jacobian, rho_form=rho_form,
+            sphere,
+            p0,
+            x,
+            update_type=update_type,
+            jacobian=jacobian,
+            rho_form=rho_form,
             history=history,
         )
     )
@@ -109,7 +114,9 @@ def test_history_is_monotone(problem):
 
 def test_vmap_over_sensors_equals_loop():
     logs = [
-        simulate_accel(random_params(s), samples_per_pose=20, transition_samples=10, noise=1e-3, rng=s)
+        simulate_accel(
+            random_params(s), samples_per_pose=20, transition_samples=10, noise=1e-3, rng=s
+        )
         for s in range(3)
     ]
     X = jnp.stack([jnp.asarray(lg.raw[lg.static]) for lg in logs])
@@ -174,8 +181,14 @@ def test_general_residual_exponential_fit(update_type):
 
     args = (jnp.asarray(t), jnp.asarray(y))
     r = lm_solve(f, jnp.array([1.0, 0.2, 0.0]), args, update_type=update_type)
-    ref = least_squares(lambda p: np.asarray(f(jnp.asarray(p), args)), [1.0, 0.2, 0.0],
-                        method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    ref = least_squares(
+        lambda p: np.asarray(f(jnp.asarray(p), args)),
+        [1.0, 0.2, 0.0],
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
     assert is_converged(int(r.status))
     np.testing.assert_allclose(r.params, ref.x, rtol=1e-7)
 

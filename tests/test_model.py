@@ -46,7 +46,9 @@ def test_residual_matches_paper_formula(rng):
     Ai2 = np.linalg.inv(A) @ np.linalg.inv(A)
     d = raw - p[6:9]
     expected = 1.3**2 - np.einsum("ni,ij,nj->n", d, Ai2, d)
-    np.testing.assert_allclose(sphere_residual(jnp.asarray(p), jnp.asarray(raw), 1.3), expected, rtol=1e-12)
+    np.testing.assert_allclose(
+        sphere_residual(jnp.asarray(p), jnp.asarray(raw), 1.3), expected, rtol=1e-12
+    )
 
 
 def test_alpha_is_symmetric_in_paper_order():
@@ -64,8 +66,11 @@ def test_jacobian_matches_finite_differences(rng, tol):
     h = 1e-6
     fd = np.stack(
         [
-            (normalized_sphere_residual(p.at[j].add(h), raw, 1.0)
-             - normalized_sphere_residual(p.at[j].add(-h), raw, 1.0)) / (2 * h)
+            (
+                normalized_sphere_residual(p.at[j].add(h), raw, 1.0)
+                - normalized_sphere_residual(p.at[j].add(-h), raw, 1.0)
+            )
+            / (2 * h)
             for j in range(9)
         ],
         axis=1,

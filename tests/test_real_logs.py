@@ -70,7 +70,9 @@ def test_imucal_annotated_session_matches_published_reference():
 
 
 def test_imucal_session_in_physical_units():
-    log = cj.load_log(shared_file("imucal_ferraris/example_ferraris_session.csv"), sample_rate=102.4)
+    log = cj.load_log(
+        shared_file("imucal_ferraris/example_ferraris_session.csv"), sample_rate=102.4
+    )
     with pytest.raises(ValueError, match="accel6"):
         cj.calibrate_accel(log)  # six faces cannot fix nine parameters: a clear error
     cal = cj.calibrate_accel(log, model="accel6")

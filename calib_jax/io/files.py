@@ -262,7 +262,9 @@ def load_log(
             return None
         if not all(have):
             missing = [k for k, h in zip(keys, have, strict=True) if not h]
-            raise ValueError(f"{path}: found some but not all of {keys}; map {missing} with --columns")
+            raise ValueError(
+                f"{path}: found some but not all of {keys}; map {missing} with --columns"
+            )
         return data[:, [source[k] for k in keys]]
 
     acc, gyro, mag = triple("a"), triple("g"), triple("m")

@@ -33,9 +33,10 @@ Decisions where Gavin's code is odd (LM_SPEC "Known quirks"):
 * lambda stays within [lambda_min, lambda_max] for all three types. A step that cannot be
   solved (non-finite h) counts as a rejection; at lambda_max it ends the fit as ``SINGULAR``.
 * Besides tests 1-3, a rejected step whose actual and predicted chi2 changes are both below
-  the round-off of chi2 (4 sqrt(m) eps chi2) ends the fit as ``CONVERGED_ROUNDOFF``: with thousands of samples the gradient at
-  the optimum is round-off, so the absolute tests alone can loop until the budget.
-* Convergence tests run after at least one accepted step. The parameter test looks at the last
+  the round-off of chi2 (4 sqrt(m) eps chi2) ends the fit as ``CONVERGED_ROUNDOFF``: with
+  thousands of samples the gradient at the optimum is round-off, so the absolute tests alone
+  can loop until the budget. This test needs no accepted step (a start already at the optimum).
+* Convergence tests 1-3 run after at least one accepted step. The parameter test looks at the last
   trial step whether or not it was accepted (as Gavin does); eps2 is tight by default, so a
   heavily damped step only passes it once lambda has grown by many orders of magnitude.
 
@@ -291,7 +292,9 @@ def lm_solve(
         elif update_type == 2:
             lam_acc = c.lam / (1.0 + alpha)
             lam_rej = c.lam + _safe_div(jnp.abs(chi2_try - c.chi2), 2.0 * alpha, jnp.inf)
-            lam_rej = jnp.where(jnp.isfinite(lam_rej) & (lam_rej > c.lam), lam_rej, c.lam * lambda_up)
+            lam_rej = jnp.where(
+                jnp.isfinite(lam_rej) & (lam_rej > c.lam), lam_rej, c.lam * lambda_up
+            )
             nu = c.nu
         else:
             lam_acc = c.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
@@ -311,9 +314,7 @@ def lm_solve(
         small_step = started & (jnp.max(jnp.abs(h) / (jnp.abs(p) + 1e-12)) < eps2)
         # not gated on an accepted step: a start already at the optimum (the algebraic
         # ellipsoid start often is, to round-off) would otherwise reject until the budget
-        roundoff = (
-            ~accept & h_ok & (jnp.abs(c.chi2 - chi2_try) <= tiny_chi2) & (pred <= tiny_chi2)
-        )
+        roundoff = ~accept & h_ok & (jnp.abs(c.chi2 - chi2_try) <= tiny_chi2) & (pred <= tiny_chi2)
         if jacobian == "exact":
             J = jax.lax.cond(accept, lambda: jac_exact(p_try), lambda: c.J)
             njev = c.njev + accept.astype(c.njev.dtype)

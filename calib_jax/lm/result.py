@@ -11,7 +11,6 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from ..linalg import eigh_small
-
 from .status import is_converged, status_message
 
 
@@ -79,7 +78,9 @@ def uncertainty(
     tiny = n * jnp.finfo(jtwj.dtype).eps * jnp.max(jnp.abs(evals))
     good = evals > tiny
     inv_evals = jnp.where(good, 1.0 / jnp.where(good, evals, 1.0), jnp.inf)
-    condition = jnp.where(jnp.all(good), jnp.max(evals) / jnp.where(good, evals, 1.0).min(), jnp.inf)
+    condition = jnp.where(
+        jnp.all(good), jnp.max(evals) / jnp.where(good, evals, 1.0).min(), jnp.inf
+    )
     # Where an eigen-direction is undetermined, every parameter that loads on it is too.
     loads = jnp.abs(evecs) > 1e-8
     undetermined = jnp.any(loads & ~good[None, :], axis=1) | (d == 0)
