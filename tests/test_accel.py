@@ -173,9 +173,9 @@ def test_no_static_interval_is_an_error():
 
 
 def test_wrong_units_are_caught():
+    # readings in m/s^2 (gains ~9.8 per unit of g), declared as g
     log = simulate_accel(
         random_params(10, scale=9.80665),
-        g=9.80665 / 9.80665 * 1.0,
         samples_per_pose=100,
         transition_samples=30,
         noise=0.01,
