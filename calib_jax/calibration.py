@@ -12,11 +12,10 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .models.accel import PARAM_NAMES, AccelParams, correct
+from .models.accel import PARAM_NAMES, AccelParams
 
 FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
@@ -96,7 +95,9 @@ class AccelCalibration:
         raw = np.asarray(raw, float)
         if raw.shape[-1] != 3:
             raise ValueError(f"raw must have 3 columns (x, y, z), got shape {raw.shape}")
-        return np.asarray(_apply(jnp.asarray(self.params), jnp.asarray(raw)))
+        # host-side numpy: no per-shape compilation (inside JAX, use models.accel.correct)
+        alpha = np.asarray(self.to_params().alpha)
+        return (raw - self.bias) @ np.linalg.inv(alpha).T
 
     # ---- report ----------------------------------------------------------------------------
     def table(self) -> str:
@@ -250,8 +251,3 @@ def _sanitize(o):
     if isinstance(o, float) and not np.isfinite(o):
         return str(o)  # 'nan', 'inf', '-inf'
     return o
-
-
-@jax.jit
-def _apply(p, raw):
-    return correct(p, raw)
