@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .calibration import AccelCalibration
+from .calibration import AccelCalibration, apply_params
 from .geometry import ellipsoid_fit, sphere_fit, sqrtm_inv_spd
 from .io.files import SensorLog
 from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
@@ -410,7 +410,8 @@ def calibrate_accel(
     params[6:9] += c_s
     cov_n = np.asarray(res.covariance, float)
     cov = cov_n * np.outer(T, T)
-    stderr = np.asarray(res.stderr, float) * T
+    se_n = np.asarray(res.stderr, float)  # in units of g (unit-radius fit)
+    stderr = se_n * T
     corr = np.asarray(res.correlation, float)
     condition = float(res.condition)
     solver_status = int(res.status)
@@ -424,8 +425,6 @@ def calibrate_accel(
         status = "not_converged"
     else:
         status = "ok"
-    # stderr in units of g (normalised): gains and cross terms relative to k/g, bias to k
-    se_n = np.asarray(res.stderr, float)
     free = np.asarray(MODELS[model])
     poor = [
         PARAM_NAMES[i]
@@ -455,6 +454,7 @@ def calibrate_accel(
     x_static = x[report.mask]
     offset, scale = _nominal(x_static, units, g)
     before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
+    after, floor = interval_errors(params, g, x, report)
     cal = AccelCalibration(
         params=params,
         stderr=stderr,
@@ -475,8 +475,8 @@ def calibrate_accel(
         n_intervals=report.n_intervals,
         n_points=n,
         rms_before=float(np.sqrt(np.mean(before**2))),
-        rms_after=float("nan"),
-        noise_floor=float("nan"),
+        rms_after=after,
+        noise_floor=floor,
         poorly_determined=poor,
         warnings=warn,
         static_means=means,
@@ -485,15 +485,13 @@ def calibrate_accel(
         sensor_id=sensor_id,
         source=source,
     )
-    after, floor = interval_errors(cal, x, report)
-    cal = cal.replace(rms_after=after, noise_floor=floor)
     if status in ("failed", "not_converged"):
         _warnings.warn(f"accelerometer calibration {status}: {cal.solver_message}", stacklevel=2)
     return cal
 
 
 def interval_errors(
-    cal: AccelCalibration, x: np.ndarray, report: StaticReport
+    params: np.ndarray, g: float, x: np.ndarray, report: StaticReport
 ) -> tuple[float, float]:
     """RMS over static intervals of (|mean corrected a| - g)/g, and its white-noise floor.
 
@@ -502,8 +500,8 @@ def interval_errors(
     """
     errs, floors = [], []
     for iv in report.intervals:
-        a = cal.apply(x[iv.start : iv.stop])
+        a = apply_params(params, x[iv.start : iv.stop])
         nrm = np.linalg.norm(a, axis=1)
-        errs.append(np.linalg.norm(a.mean(axis=0)) / cal.g - 1.0)
-        floors.append(nrm.std(ddof=1) / np.sqrt(len(nrm)) / cal.g)
+        errs.append(np.linalg.norm(a.mean(axis=0)) / g - 1.0)
+        floors.append(nrm.std(ddof=1) / np.sqrt(len(nrm)) / g)
     return float(np.sqrt(np.mean(np.square(errs)))), float(np.sqrt(np.mean(np.square(floors))))

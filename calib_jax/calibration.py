@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -95,9 +95,7 @@ class AccelCalibration:
         raw = np.asarray(raw, float)
         if raw.shape[-1] != 3:
             raise ValueError(f"raw must have 3 columns (x, y, z), got shape {raw.shape}")
-        # host-side numpy: no per-shape compilation (inside JAX, use models.accel.correct)
-        alpha = np.asarray(self.to_params().alpha)
-        return (raw - self.bias) @ np.linalg.inv(alpha).T
+        return apply_params(self.params, raw)
 
     # ---- report ----------------------------------------------------------------------------
     def table(self) -> str:
@@ -237,8 +235,12 @@ class AccelCalibration:
             raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
         return cls.from_dict(d)
 
-    def replace(self, **changes) -> AccelCalibration:
-        return AccelCalibration(**{**asdict(self), **changes})
+
+def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """a = alpha^-1 (raw - beta) in host-side numpy (no per-shape compilation; inside JAX use
+    ``models.accel.correct``)."""
+    alpha = np.asarray(AccelParams.from_vector(jnp.asarray(params)).alpha)
+    return (raw - params[6:9]) @ np.linalg.inv(alpha).T
 
 
 def _sanitize(o):

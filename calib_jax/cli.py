@@ -26,13 +26,8 @@ def run_accel(args: argparse.Namespace) -> int:
     from .accel import calibrate_accel
     from .io import load_log
 
+    # calibrate_accel raises ValueError (exit 2 in main) when the log has no accelerometer
     log = load_log(args.file, columns=args.columns, sample_rate=args.sample_rate)
-    if log.acc is None:
-        print(
-            f"error: {args.file} has no accelerometer columns; map them with --columns",
-            file=sys.stderr,
-        )
-        return 2
     cal = calibrate_accel(
         log,
         g=args.g,
