@@ -253,3 +253,190 @@ def _sanitize(o):
     if isinstance(o, float) and not np.isfinite(o):
         return str(o)  # 'nan', 'inf', '-inf'
     return o
+
+
+MAG_MODELS = ("sphere", "diag", "full")
+_field = field  # MagCalibration has an attribute named field
+
+
+@dataclass(frozen=True)
+class MagCalibration:
+    """Outcome of :func:`calib_jax.calibrate_mag`: y = W (raw - center), |y| = radius.
+
+    ``status`` is "ok", "poorly_determined", "not_converged" or "failed" (as for
+    :class:`AccelCalibration`). Errors are RMS of (|m| - radius) / radius in percent, before
+    (raw data centred on its mean, radius its mean norm) and after calibration.
+    """
+
+    center: np.ndarray
+    """Hard-iron offset (bias), raw units."""
+    soft_iron: np.ndarray
+    """W (3 x 3, symmetric): maps centred raw data onto the sphere of ``radius``."""
+    radius: float
+    """The field magnitude after calibration: ``field`` if given, else det(M)^(-1/6) in raw
+    units (det W = 1)."""
+    model: str
+    status: str
+    rms_before_pct: float
+    rms_after_pct: float
+    semi_axes: np.ndarray
+    """Ellipsoid semi-axes in raw units, in the order of the columns of ``dcm``."""
+    dcm: np.ndarray
+    """R of paper 2 eq. 18: columns are the ellipsoid's axes in the sensor frame."""
+    stderr_center: np.ndarray
+    stderr_soft_iron: np.ndarray
+    condition: float
+    solver: str
+    solver_status: int
+    solver_message: str
+    iterations: int
+    n_samples: int
+    coverage: float
+    """Fraction of 100 equal-area cells of the sphere of directions holding data."""
+    field: float | None = None
+    units: str | None = None
+    sensor: str = "mag"
+    model_selection: dict = _field(default_factory=dict)
+    """Per candidate model: BIC and RMS radial error (percent of the RMS data radius)."""
+    poorly_determined: list[str] = _field(default_factory=list)
+    warnings: list[str] = _field(default_factory=list)
+    sensor_id: str | None = None
+    date: str = _field(
+        default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    )
+    source: str | None = None
+    format_version: int = FORMAT_VERSION
+
+    @property
+    def success(self) -> bool:
+        return self.status in ("ok", "poorly_determined")
+
+    def apply(self, raw: np.ndarray) -> np.ndarray:
+        """Calibrated vectors W (raw - center), in host-side numpy; inside JAX use
+        :func:`calib_jax.models.mag.compensate`."""
+        return (np.asarray(raw, float) - self.center) @ self.soft_iron.T
+
+    def report(self) -> str:
+        unit = self.units or "raw units"
+        c, sc = self.center, self.stderr_center
+        out = [
+            f"model {self.model} on {self.n_samples} samples "
+            f"({100 * self.coverage:.0f} % of the sphere of directions covered)",
+            "center (hard iron): "
+            + ", ".join(f"{v:.6g} +- {e:.2g}" for v, e in zip(c, sc, strict=True))
+            + f" {unit}",
+            "soft iron W:",
+            *("  " + "  ".join(f"{v:+.6f}" for v in row) for row in self.soft_iron),
+            "semi-axes: " + ", ".join(f"{v:.6g}" for v in self.semi_axes) + f" {unit}; "
+            f"radius after {self.radius:.6g}"
+            + ("" if self.field is not None else f" {unit} (det W = 1)"),
+            f"RMS of (|m| - r)/r: before {self.rms_before_pct:.3f} %, "
+            f"after {self.rms_after_pct:.3f} %",
+            f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations); "
+            f"condition {self.condition:.3g}; status: {self.status}",
+        ]
+        if len(self.model_selection) > 1:
+            out.append(
+                "model choice (BIC, lower is better): "
+                + ", ".join(
+                    f"{m} {v['bic']:.1f} ({v['rms_pct']:.3f} %)"
+                    for m, v in self.model_selection.items()
+                )
+            )
+        out += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(out)
+
+    def to_dict(self) -> dict:
+        return _sanitize(
+            {
+                "format_version": self.format_version,
+                "kind": "ellipsoid",
+                "sensor": self.sensor,
+                "model": self.model,
+                "sensor_id": self.sensor_id,
+                "date": self.date,
+                "source": self.source,
+                "units": self.units,
+                "field": self.field,
+                "center": np.asarray(self.center).tolist(),
+                "soft_iron": np.asarray(self.soft_iron).tolist(),
+                "radius": self.radius,
+                "status": self.status,
+                "rms_before_pct": self.rms_before_pct,
+                "rms_after_pct": self.rms_after_pct,
+                "semi_axes": np.asarray(self.semi_axes).tolist(),
+                "dcm": np.asarray(self.dcm).tolist(),
+                "stderr": {
+                    "center": np.asarray(self.stderr_center).tolist(),
+                    "soft_iron": np.asarray(self.stderr_soft_iron).tolist(),
+                },
+                "condition": self.condition,
+                "solver": self.solver,
+                "solver_status": self.solver_status,
+                "solver_message": self.solver_message,
+                "iterations": self.iterations,
+                "n_samples": self.n_samples,
+                "coverage": self.coverage,
+                "model_selection": self.model_selection,
+                "poorly_determined": list(self.poorly_determined),
+                "warnings": list(self.warnings),
+            }
+        )
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> MagCalibration:
+        version = d.get("format_version")
+        if version != FORMAT_VERSION:
+            raise ValueError(
+                f"calibration format_version {version!r} is not supported (this calib_jax "
+                f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
+            )
+        if d.get("kind") != "ellipsoid" or d.get("model") not in MAG_MODELS:
+            raise ValueError(
+                f"not an ellipsoid calibration (kind {d.get('kind')!r}, model "
+                f"{d.get('model')!r}); load accelerometer files with AccelCalibration.load"
+            )
+
+        def arr(v):
+            return np.array(v, dtype=float)
+
+        return cls(
+            center=arr(d["center"]),
+            soft_iron=arr(d["soft_iron"]),
+            radius=float(d["radius"]),
+            model=d["model"],
+            status=d["status"],
+            rms_before_pct=float(d["rms_before_pct"]),
+            rms_after_pct=float(d["rms_after_pct"]),
+            semi_axes=arr(d["semi_axes"]),
+            dcm=arr(d["dcm"]),
+            stderr_center=arr(d["stderr"]["center"]),
+            stderr_soft_iron=arr(d["stderr"]["soft_iron"]),
+            condition=float(d["condition"]),
+            solver=d["solver"],
+            solver_status=int(d["solver_status"]),
+            solver_message=d["solver_message"],
+            iterations=int(d["iterations"]),
+            n_samples=int(d["n_samples"]),
+            coverage=float(d["coverage"]),
+            field=None if d.get("field") is None else float(d["field"]),
+            units=d.get("units"),
+            sensor=d.get("sensor", "mag"),
+            model_selection=d.get("model_selection", {}),
+            poorly_determined=list(d.get("poorly_determined", [])),
+            warnings=list(d.get("warnings", [])),
+            sensor_id=d.get("sensor_id"),
+            date=d["date"],
+            source=d.get("source"),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> MagCalibration:
+        try:
+            d = json.loads(Path(path).read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
+        return cls.from_dict(d)

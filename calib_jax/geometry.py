@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .linalg import cho_solve_small, eigh_small
+from .linalg import cho_solve_small, eigh_small, inv3
 
 
 def sphere_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -52,3 +52,97 @@ def sqrtm_inv_spd(M: jax.Array) -> jax.Array:
     """M^(-1/2) for a symmetric positive-definite 3x3 M (symmetric result)."""
     evals, evecs = eigh_small(M)
     return (evecs / jnp.sqrt(evals)) @ evecs.T
+
+
+# ---------------------------------------------------------------------------------------------
+# Paper 2, section 2.2: the quadric, its matrix form and its eigen-analysis
+
+
+def _design10(x: jax.Array) -> jax.Array:
+    X, Y, Z = x[:, 0], x[:, 1], x[:, 2]
+    one = jnp.ones_like(X)
+    return jnp.stack(
+        [X * X, Y * Y, Z * Z, 2 * Y * Z, 2 * X * Z, 2 * X * Y, 2 * X, 2 * Y, 2 * Z, one], axis=1
+    )
+
+
+def ellipsoid_fit_constrained(
+    x: jax.Array, w: jax.Array, k: float = 4.0
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Ellipsoid-specific algebraic fit (Li and Griffiths 2004), pure and jittable.
+
+    Fits paper 2's quadric (eq. 4) ``a x^2 + b y^2 + c z^2 + 2f yz + 2g xz + 2h xy + 2p x + 2q y
+    + 2r z + d = 0`` by weighted linear least squares subject to ``k J - I^2 = 1`` with
+    ``I = a + b + c`` and ``J = ab + bc + ca - f^2 - g^2 - h^2``. With k = 4 the constraint
+    admits only ellipsoids, so the fit is never a hyperboloid, whatever the coverage (it favours
+    ellipsoids whose shortest axis is at least half the longest; the LM refinement removes that
+    bias). The constrained problem is the generalised eigenproblem ``M v = lam C v`` of
+    Li-Griffiths, solved here as a symmetric one, ``H C H u = (1/lam) u`` with
+    ``H = M^(-1/2)``, so it needs only the Jacobi ``eigh_small``.
+
+    x should be centred and scaled to about unit radius. Returns (centre, M, ok) with the
+    ellipsoid ``(x - c)' M (x - c) = 1``; ok is False for degenerate data (a plane, a line).
+    """
+    D = _design10(x)
+    S = (D * w[:, None]).T @ D
+    S11, S12, S22 = S[:6, :6], S[:6, 6:], S[6:, 6:]
+    S22inv_S21 = jnp.stack([cho_solve_small(S22, S12.T[:, j]) for j in range(6)], axis=1)
+    Mr = S11 - S12 @ S22inv_S21
+    Mr = 0.5 * (Mr + Mr.T)
+    d, V = eigh_small(Mr)
+    d_ok = jnp.all(d > 0)
+    H = (V / jnp.sqrt(jnp.where(d > 0, d, 1.0))) @ V.T
+    h = k / 2.0 - 1.0
+    C = jnp.zeros((6, 6), x.dtype)
+    C = C.at[:3, :3].set(jnp.array([[-1.0, h, h], [h, -1.0, h], [h, h, -1.0]], x.dtype))
+    C = C.at[3:, 3:].set(-k * jnp.eye(3, dtype=x.dtype))
+    mu, U = eigh_small(H @ C @ H)
+    v1 = H @ U[:, -1]  # the single positive eigenvalue (C has inertia (1, 5))
+    v1 = jnp.where(v1[0] + v1[1] + v1[2] < 0, -v1, v1)
+    v2 = -S22inv_S21 @ v1
+    a, b, c, f, g, hh = v1
+    A = jnp.array([[a, hh, g], [hh, b, f], [g, f, c]])
+    centre = -inv3(A) @ v2[:3]
+    k0 = centre @ A @ centre - v2[3]
+    M = A / k0
+    evals, _ = eigh_small(M)
+    ok = d_ok & (mu[-1] > 0) & jnp.all(evals > 0) & jnp.all(jnp.isfinite(M))
+    ok = ok & jnp.all(jnp.isfinite(centre))
+    return centre, M, ok
+
+
+def quadric_matrix(centre: jax.Array, M: jax.Array) -> jax.Array:
+    """Paper 2's matrix form S (eq. 6-8) of the ellipsoid (x - c)' M (x - c) = 1.
+
+    X S X' = 0 with X = [x, y, z, 1]; S is scaled so that its (4, 4) entry is ``c'Mc - 1``.
+    """
+    top = jnp.concatenate([M, -(M @ centre)[:, None]], axis=1)
+    bottom = jnp.concatenate([-(M @ centre), jnp.array([centre @ M @ centre - 1.0])])
+    return jnp.concatenate([top, bottom[None, :]], axis=0)
+
+
+def ellipsoid_from_quadric(S: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """Paper 2's eigen-analysis (eq. 9-20) of a quadric in matrix form S (4 x 4, eq. 8).
+
+    Centre: the point where the gradient of X S X' vanishes (eq. 9). Translation T (eq. 10):
+    S* = T S T' (eq. 11) has no linear terms; dividing by its constant term gives the canonical
+    form x' A x = 1 (eq. 12-15). The eigen-decomposition A = R D R' (eq. 16-18) gives the DCM R
+    (eigenvectors as columns, det +1) and the semi-axes 1/sqrt(D) (eq. 19-20).
+
+    Returns (centre, A, R, semi_axes), the semi-axes ascending in eigenvalue order
+    (descending in length).
+    """
+    A3 = S[:3, :3]
+    centre = -inv3(A3) @ S[:3, 3]
+    T = jnp.eye(4, dtype=S.dtype).at[3, :3].set(centre)
+    Sc = T @ S @ T.T
+    A = -Sc[:3, :3] / Sc[3, 3]
+    evals, R = eigh_small(0.5 * (A + A.T))
+    R = R * jnp.where(jnp.linalg.det(R) < 0, -1.0, 1.0)
+    return centre, A, R, 1.0 / jnp.sqrt(evals)
+
+
+def compensation_matrix(R: jax.Array, semi_axes: jax.Array, radius: jax.Array) -> jax.Array:
+    """Paper 2's compensation as one matrix: rotate into the ellipsoid's axes (R'), scale each
+    axis to the sphere of ``radius``, rotate back (R). Equals ``radius * sqrtm(M)``."""
+    return (R * (radius / semi_axes)) @ R.T

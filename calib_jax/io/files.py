@@ -138,23 +138,49 @@ def _is_number(s: str) -> bool:
         return False
 
 
-def _read_text(path: Path) -> tuple[list[str] | None, np.ndarray, int]:
-    """Header (or None) and a float matrix; rows that do not parse become NaN rows."""
+def _read_text(path: Path) -> tuple[list[str] | None, np.ndarray, int, dict[str, float]]:
+    """Header (or None), a float matrix and preamble key/values; bad rows become NaN rows.
+
+    A preamble of ``key,value`` lines before the header (``Fs,50.00``) is skipped and returned
+    as a dict; the header is the non-numeric line just before the first numeric row.
+    """
     text = path.read_text(errors="replace")
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise ValueError(f"{path} has no data rows")
-    delim = _sniff_delimiter(lines[0])
+    delim = _sniff_delimiter(lines[-1])
 
     def split(line: str) -> list[str]:
         if delim is None:
             return line.split()
         return next(csv.reader(io.StringIO(line), delimiter=delim))
 
-    first = split(lines[0])
-    header = None if all(_is_number(c) for c in first if c.strip()) else [c.strip() for c in first]
-    body = lines[1:] if header is not None else lines
-    width = len(header) if header is not None else len(first)
+    def numeric(cells: list[str]) -> bool:
+        return all(_is_number(c) for c in cells if c.strip())
+
+    # first numeric row whose width the next row repeats: the data starts there
+    start = 0
+    for i in range(min(len(lines), 64)):
+        cells = split(lines[i])
+        nxt = split(lines[i + 1]) if i + 1 < len(lines) else cells
+        if numeric(cells) and len(nxt) == len(cells):
+            start = i
+            break
+    preamble: dict[str, float] = {}
+    header = None
+    if start > 0:
+        head = split(lines[start - 1])
+        if not numeric(head) and len(head) == len(split(lines[start])):
+            header = [c.strip() for c in head]
+        for line in lines[: start - 1 if header is not None else start]:
+            cells = [c.strip() for c in split(line)]
+            if len(cells) == 2 and _is_number(cells[1]):
+                preamble[cells[0].lower()] = float(cells[1])
+    elif not numeric(split(lines[0])):
+        header = [c.strip() for c in split(lines[0])]
+        start = 1
+    body = lines[start:]
+    width = len(header) if header is not None else len(split(body[0])) if body else 0
     rows = np.full((len(body), width), np.nan)
     bad = 0
     for i, line in enumerate(body):
@@ -165,7 +191,10 @@ def _read_text(path: Path) -> tuple[list[str] | None, np.ndarray, int]:
         # non-numeric cells (a 'part' label column, say) become NaN; the calibration counts
         # non-finite values in the columns it uses
         rows[i] = [float(c) if _is_number(c) else np.nan for c in cells]
-    return header, rows, bad
+    return header, rows, bad, preamble
+
+
+_RATE_KEYS = ("fs", "sample rate", "sample_rate", "samplerate", "rate", "hz", "frequency")
 
 
 def _read_mat(path: Path) -> tuple[list[str] | None, np.ndarray, int]:
@@ -182,7 +211,7 @@ def _read_mat(path: Path) -> tuple[list[str] | None, np.ndarray, int]:
     if named:
         n = max(len(v) for v in named.values())
         names = list(named)
-        return names, np.column_stack([named[k] for k in names if len(named[k]) == n]), 0
+        return names, np.column_stack([named[k] for k in names if len(named[k]) == n]), 0, {}
     mats = [v for v in arrays.values() if v.ndim == 2 and min(v.shape) >= 3]
     if len(mats) != 1:
         raise ValueError(
@@ -192,7 +221,7 @@ def _read_mat(path: Path) -> tuple[list[str] | None, np.ndarray, int]:
     m = mats[0]
     if m.shape[0] < m.shape[1]:
         m = m.T
-    return None, m, 0
+    return None, m, 0, {}
 
 
 def load_log(
@@ -216,8 +245,10 @@ def load_log(
         raise ValueError(f"{path} does not exist")
     mapping = parse_columns(columns)
     is_binary_mat = path.suffix.lower() == ".mat" and path.read_bytes()[:6] == b"MATLAB"
-    header, data, bad = _read_mat(path) if is_binary_mat else _read_text(path)
+    header, data, bad, preamble = _read_mat(path) if is_binary_mat else _read_text(path)
     notes = []
+    if preamble:
+        notes.append("preamble: " + ", ".join(f"{k}={v:g}" for k, v in preamble.items()))
     if bad:
         notes.append(f"{bad} rows had the wrong number of fields and were skipped")
     source: dict[str, int] = {}
@@ -276,6 +307,8 @@ def load_log(
     t = data[:, source["t"]] if "t" in source else None
     temp = data[:, source["temp"]] if "temp" in source else None
     rate = sample_rate
+    if rate is None:
+        rate = next((preamble[k] for k in _RATE_KEYS if k in preamble), None)
     if rate is None and t is not None:
         dt = np.diff(t[np.isfinite(t)])
         dt = dt[dt > 0]

@@ -1,0 +1,341 @@
+"""From a raw log to an ellipsoid (hard/soft-iron) calibration (paper 2, section 2.2).
+
+Host side (checks, normalisation, model choice) around a pure jitted core:
+
+1. drop non-finite rows (counted, reported);
+2. coverage: the directions from the data centre must not lie in one plane (error, with the
+   fix); one hemisphere or a small part of the sphere is a warning (the shape is then poorly
+   determined, which the standard errors show);
+3. normalise: x_n = (x - mean) / s, s the RMS distance from the mean, so tolerances mean the
+   same for counts, gauss and microtesla;
+4. start from the ellipsoid-specific algebraic fit (Li-Griffiths, never a hyperboloid; see
+   :func:`calib_jax.geometry.ellipsoid_fit_constrained`) and refine the quadric residual
+   (:func:`calib_jax.models.mag.quadric_residual`) with the LM solver and exact Jacobians;
+5. model: sphere (hard iron only), diag (axis-aligned ellipsoid), full, or ``auto``: the one
+   with the lowest BIC of the radial error;
+6. radius: the known field magnitude if given (output in its units), else det(M)^(-1/6) in raw
+   units (det W = 1, MATLAB magcal's convention);
+7. report the RMS radial error before (centred on the data mean) and after, in percent.
+
+The same routine calibrates an accelerometer (paper 2 applies it to every sensor): give static
+samples and ``field=1`` (g). With ``model="full"`` it is paper 1's nine-parameter model with a
+different parametrisation (W = alpha, c = beta), so both fits agree.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings as _warnings
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .calibration import MagCalibration
+from .geometry import ellipsoid_fit_constrained, sphere_fit
+from .io.files import SensorLog
+from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
+from .models.mag import (
+    MAG_MODELS,
+    N_PARAMS,
+    PARAM_NAMES,
+    natural_radius,
+    pack,
+    quadric_residual,
+    radial_error,
+    soft_iron_matrix,
+    unpack,
+)
+
+SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
+MagModel = Literal["sphere", "diag", "full", "auto"]
+
+# normalised standard error (units of the radius) above which a parameter is poorly determined
+POOR_STDERR = 1e-2
+# coverage: smallest eigenvalue of the direction scatter (1/3 for a uniform sphere, 0 for a
+# circle in one plane); below FLAT the shape along the normal is unobservable
+FLAT = 0.01
+
+
+# ---------------------------------------------------------------------------------------------
+# pure core
+
+
+def ellipsoid_start(x: jax.Array, w: jax.Array, model: str) -> jax.Array:
+    """Start for the normalised fit: the constrained algebraic ellipsoid (full), or the
+    algebraic sphere (sphere, diag; and full when the algebraic fit fails)."""
+    cs, r = sphere_fit(x, w)
+    p_sph = pack(cs, jnp.eye(3, dtype=x.dtype) / (r * r), model)
+    if model != "full":
+        return p_sph
+    c, M, ok = ellipsoid_fit_constrained(x, w)
+    p_ell = pack(c, jnp.where(ok, M, jnp.eye(3, dtype=x.dtype)), "full")
+    return jnp.where(ok & jnp.all(jnp.isfinite(p_ell)), p_ell, p_sph)
+
+
+def fit_ellipsoid_normalized(
+    x: jax.Array, w: jax.Array, model: str = "full", solver: str = "lm1", **options
+) -> LMResult:
+    """Pure core: fit the quadric residual to unit-scale data x (N, 3) with weights w (N,).
+
+    Jittable and vmappable over sensors; ``model``, ``solver`` and ``options`` are static.
+    Returns the LMResult of the packed parameters (see :mod:`calib_jax.models.mag`).
+    """
+    p0 = ellipsoid_start(x, w, model)
+
+    def residual(p, data):
+        return quadric_residual(p, data[0], model)
+
+    if solver == "optimistix":
+        return optx_solve(residual, p0, (x, w), weights=w, **options)
+    update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
+    return lm_solve(residual, p0, (x, w), weights=w, update_type=update_type, **options)
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(solver: str, model: str, options: tuple):
+    return jax.jit(
+        functools.partial(fit_ellipsoid_normalized, solver=solver, model=model, **dict(options))
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _shape_jacobian(model: str):
+    """d(centre, W / radius)/dp for the standard errors of centre and soft-iron matrix."""
+
+    def f(p):
+        c, M = unpack(p, model)
+        W = soft_iron_matrix(M, natural_radius(M))
+        return jnp.concatenate([c, W.ravel()])
+
+    return jax.jit(jax.jacfwd(f))
+
+
+def _bucket(n: int) -> int:
+    return max(64, 1 << int(np.ceil(np.log2(max(n, 1)))))
+
+
+# ---------------------------------------------------------------------------------------------
+# host side
+
+
+def sphere_coverage(dirs: np.ndarray, cells: int = 100) -> tuple[float, float, np.ndarray]:
+    """Coverage of unit directions (N, 3): the fraction of ``cells`` equal-area cells (a
+    Fibonacci lattice) holding at least one direction, the smallest eigenvalue of the
+    direction scatter (1/3 uniform, 0 planar) and its eigenvector (the unseen axis)."""
+    k = np.arange(cells) + 0.5
+    z = 1.0 - 2.0 * k / cells
+    phi = np.pi * (1.0 + 5**0.5) * k
+    rz = np.sqrt(1.0 - z * z)
+    grid = np.stack([rz * np.cos(phi), rz * np.sin(phi), z], axis=1)
+    hit = np.unique(np.argmax(dirs @ grid.T, axis=1))
+    evals, evecs = np.linalg.eigh(dirs.T @ dirs / len(dirs))
+    return len(hit) / cells, float(evals[0]), evecs[:, 0]
+
+
+def _vec(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:+.2f}" for x in v) + "]"
+
+
+def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple) -> LMResult:
+    n = len(xn)
+    size = _bucket(n)
+    xpad = np.zeros((size, 3))
+    xpad[:n] = xn
+    xpad[n:] = xn[0]
+    wpad = np.zeros(size)
+    wpad[:n] = 1.0
+    return _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+
+
+def calibrate_mag(
+    data: np.ndarray | SensorLog,
+    *,
+    model: MagModel = "auto",
+    field: float | None = None,
+    units: str | None = None,
+    sensor: Literal["mag", "accel"] = "mag",
+    solver: str = "lm1",
+    solver_options: dict | None = None,
+    sensor_id: str | None = None,
+) -> MagCalibration:
+    """Fit an ellipsoid to a free-rotation log and map it onto a sphere (paper 2, 2.2).
+
+    Parameters
+    ----------
+    data : (N, 3) array or SensorLog
+        Raw vectors (any unit) or a loaded log (its ``mag`` columns, or ``acc`` with
+        ``sensor="accel"``). Rotate the sensor through as many orientations as possible.
+    model : {"auto", "sphere", "diag", "full"}
+        Hard iron only (centre and radius), an axis-aligned ellipsoid, a full ellipsoid, or
+        the lowest-BIC of the three.
+    field : float, optional
+        Known magnitude of the field (e.g. 44.3 uT, or 1 g): the calibrated output then has
+        this magnitude, in its units. Default: det(W) = 1 and output in raw units.
+    units : str, optional
+        Label for the raw units (reported only).
+    solver : {"lm1", "lm2", "lm3", "optimistix"}
+    solver_options : dict, optional
+        Passed to the solver.
+
+    Returns
+    -------
+    MagCalibration
+        ``apply(raw)`` gives W (raw - c); ``status`` says whether to trust it.
+
+    Raises
+    ------
+    ValueError
+        With what to change: wrong shape, fewer than 20 finite samples, all directions in one
+        plane (a turn about a single axis), an unknown model or solver, a bad field value.
+    """
+    source = None
+    warn: list[str] = []
+    if isinstance(data, SensorLog):
+        x = data.mag if sensor == "mag" else data.acc
+        if x is None:
+            cols = "mx, my, mz" if sensor == "mag" else "ax, ay, az"
+            raise ValueError(f"{data.path}: no {sensor} columns ({cols}); map them with --columns")
+        source = data.path
+        warn += list(data.notes)
+        x = np.asarray(x, float)
+    else:
+        x = np.asarray(data, float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"{sensor} data must be (samples, 3), got shape {x.shape}")
+    if model not in (*MAG_MODELS, "auto"):
+        raise ValueError(f"model must be one of sphere, diag, full, auto; got {model!r}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if field is not None and not (np.isfinite(field) and field > 0):
+        raise ValueError(f"field must be a positive magnitude, got {field!r}")
+    if jnp.zeros(()).dtype != jnp.float64:
+        _warnings.warn(
+            "jax_enable_x64 is off: fitting in float32 loses ~1e-7 relative accuracy; call "
+            "jax.config.update('jax_enable_x64', True) first",
+            stacklevel=2,
+        )
+
+    finite = np.all(np.isfinite(x), axis=1)
+    n_bad = int((~finite).sum())
+    if n_bad:
+        warn.append(f"{n_bad} rows with NaN or inf were left out of the fit")
+    xv = x[finite]
+    if len(xv) < 20:
+        raise ValueError(
+            f"only {len(xv)} finite samples; an ellipsoid needs many more (record a slow tumble "
+            "through all orientations, a few hundred samples at least)"
+        )
+
+    mean = xv.mean(axis=0)
+    s = float(np.sqrt(np.mean(np.sum((xv - mean) ** 2, axis=1))))
+    if not s > 0:
+        raise ValueError("all samples are identical: the sensor did not move or is stuck")
+    xn = (xv - mean) / s
+    cs, _ = sphere_fit(jnp.asarray(xn), jnp.ones(len(xn)))
+    d = xn - np.asarray(cs)
+    dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    frac, min_eig, unseen = sphere_coverage(dirs)
+    if min_eig < FLAT:
+        raise ValueError(
+            f"the field directions lie in one plane (normal {_vec(unseen)} in the sensor frame): "
+            "this looks like a turn about a single axis, which cannot determine an ellipsoid. "
+            "Tumble the sensor through all orientations; a one-axis turn is what the plane "
+            "alignment (calib_jax.align.plane_alignment) needs instead"
+        )
+    if frac < 0.3:
+        warn.append(
+            f"the data cover {100 * frac:.0f} % of the sphere of directions (unseen axis "
+            f"{_vec(unseen)}): the shape is poorly determined there; tumble through more "
+            "orientations"
+        )
+
+    opts = tuple(sorted((solver_options or {}).items()))
+    candidates = MAG_MODELS if model == "auto" else (model,)
+    n = len(xn)
+    fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float]] = {}
+    for m in candidates:
+        res = _fit(xn, m, solver, opts)
+        c_n, M_n = unpack(res.params, m)
+        # radial error in units of s (not relative to the fitted radius: see quadric_residual)
+        e = np.asarray(radial_error(c_n, M_n, jnp.asarray(xn)) * natural_radius(M_n))
+        ms = float(np.mean(e**2))
+        bic = n * np.log(max(ms, 1e-300)) + N_PARAMS[m] * np.log(n)
+        fits[m] = (res, np.asarray(c_n), np.asarray(M_n), ms, bic)
+    selection = {m: {"bic": f[4], "rms_pct": 100 * np.sqrt(f[3])} for m, f in fits.items()}
+    # rms_pct: RMS radial error in percent of the data's RMS radius s
+    chosen = min(fits, key=lambda m: fits[m][4]) if model == "auto" else model
+    res, c_n, M_n, _, _ = fits[chosen]
+
+    centre = mean + s * c_n
+    M = M_n / s**2
+    radius = float(field) if field is not None else float(natural_radius(jnp.asarray(M)))
+    W = np.asarray(soft_iron_matrix(jnp.asarray(M), radius))
+    evals, R = np.linalg.eigh(M)
+    if np.linalg.det(R) < 0:
+        R[:, 0] = -R[:, 0]
+    semi_axes = 1.0 / np.sqrt(evals)
+
+    # standard errors: centre in raw units, W relative (d(W/r)) times the radius
+    Jc = np.asarray(_shape_jacobian(chosen)(res.params))
+    cov_n = np.asarray(res.covariance, float)
+    cov_cw = Jc @ cov_n @ Jc.T
+    se = np.sqrt(np.clip(np.diag(cov_cw), 0.0, None))
+    stderr_center = s * se[:3]
+    stderr_soft_iron = (radius * se[3:]).reshape(3, 3)
+    se_n = np.asarray(res.stderr, float)
+
+    solver_status = int(res.status)
+    if solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED) or not np.all(
+        np.isfinite(W)
+    ):
+        status = "failed"
+    elif not is_converged(solver_status):
+        status = "not_converged"
+    else:
+        status = "ok"
+    names = PARAM_NAMES[chosen]
+    poor = [names[i] for i in range(len(names)) if not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR]
+    if status == "ok" and poor:
+        status = "poorly_determined"
+        warn.append(
+            "poorly determined (normalised std. error above 1 %): "
+            + ", ".join(poor)
+            + "; cover more orientations"
+        )
+
+    r0 = np.linalg.norm(xv - mean, axis=1)
+    before = r0 / r0.mean() - 1.0
+    after = np.linalg.norm((xv - centre) @ W.T, axis=1) / radius - 1.0
+    cal = MagCalibration(
+        center=centre,
+        soft_iron=W,
+        radius=radius,
+        model=chosen,
+        status=status,
+        rms_before_pct=float(100 * np.sqrt(np.mean(before**2))),
+        rms_after_pct=float(100 * np.sqrt(np.mean(after**2))),
+        semi_axes=semi_axes,
+        dcm=R,
+        stderr_center=stderr_center,
+        stderr_soft_iron=stderr_soft_iron,
+        condition=float(res.condition),
+        solver=solver,
+        solver_status=solver_status,
+        solver_message=status_message(solver_status),
+        iterations=int(res.iterations),
+        n_samples=int(len(xv)),
+        coverage=float(frac),
+        field=None if field is None else float(field),
+        units=units,
+        sensor=sensor,
+        model_selection=selection,
+        poorly_determined=poor,
+        warnings=warn,
+        sensor_id=sensor_id,
+        source=source,
+    )
+    if status in ("failed", "not_converged"):
+        _warnings.warn(f"ellipsoid calibration {status}: {cal.solver_message}", stacklevel=2)
+    return cal
