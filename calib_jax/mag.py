@@ -296,7 +296,7 @@ def calibrate_mag(
     else:
         status = "ok"
     names = PARAM_NAMES[chosen]
-    poor = [names[i] for i in range(len(names)) if not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR]
+    poor = [nm for nm, e in zip(names, se_n, strict=True) if not np.isfinite(e) or e > POOR_STDERR]
     if status == "ok" and poor:
         status = "poorly_determined"
         warn.append(
