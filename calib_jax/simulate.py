@@ -176,3 +176,157 @@ def simulate_accel(
         directions=dirs,
         sample_rate=float(sample_rate),
     )
+
+
+# ---------------------------------------------------------------------------------------------
+# MARG: accelerometer + magnetometer with known ellipsoid, misalignment and attitude
+
+
+def random_rotation(rng: np.random.Generator | int = 0, max_angle_deg: float = 180.0) -> np.ndarray:
+    """A random rotation matrix of angle up to ``max_angle_deg`` about a uniform axis."""
+    rng = np.random.default_rng(rng)
+    axis = random_directions(1, rng)[0]
+    ang = np.deg2rad(rng.uniform(0.0, max_angle_deg))
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * (K @ K)
+
+
+def random_ellipsoid(
+    rng: np.random.Generator | int = 0,
+    radius: float = 1.0,
+    axis_spread: float = 0.3,
+    center_spread: float = 0.5,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(center, W) of a random ellipsoid: W = R diag(1/k) R' with k in 1 +- axis_spread, so
+    raw = W^-1 y + center for y on the sphere of ``radius``; center within +-center_spread
+    times the radius."""
+    rng = np.random.default_rng(rng)
+    R = random_rotation(rng)
+    k = 1.0 + rng.uniform(-axis_spread, axis_spread, 3)
+    W = (R / k) @ R.T
+    c = rng.uniform(-center_spread, center_spread, 3) * radius
+    return c, W
+
+
+def _quat_to_dcm_np(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def _dcm_to_quat_np(C: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(C).as_quat()  # x, y, z, w
+    q = np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+@dataclass(frozen=True)
+class SimulatedMARG:
+    """A simulated accelerometer + magnetometer log with its truth.
+
+    Frames: the board (body) frame, in which ``quat`` is body -> ENU; the accelerometer frame
+    a_s = R_acc_board' a_body; the magnetometer frame m_s = R_mag_board' m_body. The raw
+    magnetometer is W^-1 m_s + center (so the ellipsoid calibration recovers W, center).
+    """
+
+    acc: np.ndarray
+    mag: np.ndarray
+    quat: np.ndarray
+    acc_true: np.ndarray
+    """Noise-free accelerometer in its own frame (g)."""
+    mag_true: np.ndarray
+    """Noise-free field in the magnetometer frame (field units)."""
+    center: np.ndarray
+    soft_iron: np.ndarray
+    field: float
+    dip_deg: float
+    R_acc_board: np.ndarray
+    R_mag_board: np.ndarray
+    sample_rate: float
+
+    @property
+    def R_acc_from_mag(self) -> np.ndarray:
+        """m in the accelerometer frame = R m (magnetometer frame)."""
+        return self.R_acc_board.T @ self.R_mag_board
+
+
+def tumble_quaternions(n: int, rng: np.random.Generator | int = 0, knots: int = 24) -> np.ndarray:
+    """A smooth random tumble through all orientations: slerp between random knots."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    rng = np.random.default_rng(rng)
+    key = Rotation.random(knots, random_state=rng)
+    return _dcm_to_quat_np(Slerp(np.linspace(0, 1, knots), key)(np.linspace(0, 1, n)).as_matrix())
+
+
+def plane_turn_quaternions(
+    n: int, incline_deg: float = 20.0, incline_azimuth_deg: float = 30.0, turns: float = 1.2
+) -> np.ndarray:
+    """The board on an inclined plane, turning about its own z axis (paper 2's test motion):
+    C = R_incline Rz(psi), psi from 0 to ``turns`` revolutions."""
+    from scipy.spatial.transform import Rotation
+
+    az = np.deg2rad(incline_azimuth_deg)
+    axis = np.array([np.cos(az), np.sin(az), 0.0])
+    R_inc = Rotation.from_rotvec(axis * np.deg2rad(incline_deg))
+    psi = np.linspace(0.0, 2 * np.pi * turns, n)
+    C = R_inc * Rotation.from_euler("z", psi[:, None])
+    return _dcm_to_quat_np(C.as_matrix())
+
+
+def simulate_marg(
+    quat: np.ndarray,
+    *,
+    center: np.ndarray | None = None,
+    soft_iron: np.ndarray | None = None,
+    field: float = 45.0,
+    dip_deg: float = 65.0,
+    R_acc_board: np.ndarray | None = None,
+    R_mag_board: np.ndarray | None = None,
+    acc_noise: float = 2e-3,
+    mag_noise: float = 0.2,
+    sample_rate: float = 100.0,
+    rng: np.random.Generator | int = 0,
+) -> SimulatedMARG:
+    """Accelerometer (g, already calibrated) and raw magnetometer along an attitude path.
+
+    The accelerometer reads the upward specific force (static: no linear acceleration), the
+    magnetometer the field [0, cos dip, -sin dip] * field in ENU, each in its own frame,
+    the magnetometer through the ellipsoid (raw = W^-1 m + center), plus white noise.
+    """
+    rng = np.random.default_rng(rng)
+    C = _quat_to_dcm_np(np.asarray(quat, float))  # body -> nav
+    Ra = np.eye(3) if R_acc_board is None else np.asarray(R_acc_board, float)
+    Rm = np.eye(3) if R_mag_board is None else np.asarray(R_mag_board, float)
+    c = np.zeros(3) if center is None else np.asarray(center, float)
+    W = np.eye(3) if soft_iron is None else np.asarray(soft_iron, float)
+    d = np.deg2rad(dip_deg)
+    g_nav = np.array([0.0, 0.0, 1.0])
+    h_nav = field * np.array([0.0, np.cos(d), -np.sin(d)])
+    a_body = np.einsum("nji,j->ni", C, g_nav)  # C' g
+    m_body = np.einsum("nji,j->ni", C, h_nav)
+    a_s = a_body @ Ra  # Ra' a  (row vectors)
+    m_s = m_body @ Rm
+    raw_m = m_s @ np.linalg.inv(W).T + c
+    return SimulatedMARG(
+        acc=a_s + rng.normal(scale=acc_noise, size=a_s.shape),
+        mag=raw_m + rng.normal(scale=mag_noise, size=raw_m.shape),
+        quat=np.asarray(quat, float),
+        acc_true=a_s,
+        mag_true=m_s,
+        center=c,
+        soft_iron=W,
+        field=float(field),
+        dip_deg=float(dip_deg),
+        R_acc_board=Ra,
+        R_mag_board=Rm,
+        sample_rate=float(sample_rate),
+    )

@@ -97,9 +97,7 @@ def cholesky3(M: jax.Array) -> jax.Array:
     l21 = (M[2, 1] - l20 * l10) / l11
     l22 = jnp.sqrt(M[2, 2] - l20 * l20 - l21 * l21)
     z = jnp.zeros((), M.dtype)
-    return jnp.stack(
-        [jnp.stack([l00, z, z]), jnp.stack([l10, l11, z]), jnp.stack([l20, l21, l22])]
-    )
+    return jnp.stack([jnp.stack([l00, z, z]), jnp.stack([l10, l11, z]), jnp.stack([l20, l21, l22])])
 
 
 def quadric_residual(p: Float[Array, " n"], x: Float[Array, "N 3"], model: str) -> jax.Array:

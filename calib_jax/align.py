@@ -1,0 +1,344 @@
+"""Alignment: sensor-plane alignment (paper 2, section 2.1) and the accel-mag rotation.
+
+Sensor-plane alignment. The board turns about its z axis with its XY plane held on a fixed
+plane; every sensor's vector tip then draws a circle in a plane parallel to the board's XY
+plane. Fit the plane z = alpha x + beta y + gamma to the tips (eq. 1), take its normal
+n = [-alpha, -beta, 1] (eq. 2), and rotate it onto [0, 0, 1]: first about x by eps_x, then
+about y by eps_y, giving Align = Ry(eps_y) Rx(eps_x) (eq. 3). A vector that lies along the
+turning axis (gravity on a level plane) draws no circle: its mean direction is then the axis.
+
+Accel-mag alignment (beyond the paper). For a static sensor the angle between gravity and the
+field is constant, so with unit vectors a_i (accelerometer frame) and m_i (magnetometer frame)
+the rotation R (magnetometer -> accelerometer frame) makes a_i . R m_i = cos(theta) for all i.
+First the 48 signed axis permutations are scored by the spread of a . P m (chips that mount the
+magnetometer with swapped or negated axes show up here), then R = exp([v]x) P and
+beta = cos(theta) are refined by the LM solver on e_i = a_i . R m_i - beta. The dip is
+theta - 90 deg.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .lm import is_converged, lm_solve, status_message
+from .rotations import describe_permutation, rotation_angle_deg, rotvec_to_dcm, signed_permutations
+
+# ---------------------------------------------------------------------------------------------
+# sensor plane alignment: pure parts
+
+
+def fit_plane(v: jax.Array, w: jax.Array | None = None) -> jax.Array:
+    """Least-squares plane z = alpha x + beta y + gamma through points v (N, 3) (paper 2 eq. 1).
+
+    Returns [alpha, beta, gamma]."""
+    A = jnp.stack([v[:, 0], v[:, 1], jnp.ones_like(v[:, 0])], axis=1)
+    w = jnp.ones(v.shape[0], v.dtype) if w is None else w
+    Aw = A * w[:, None]
+    return jnp.linalg.solve(Aw.T @ A, Aw.T @ v[:, 2])
+
+
+def plane_normal(coef: jax.Array) -> jax.Array:
+    """Unit normal [-alpha, -beta, 1] / |.| of the plane (paper 2 eq. 2)."""
+    n = jnp.stack([-coef[0], -coef[1], jnp.ones_like(coef[0])])
+    return n / jnp.linalg.norm(n)
+
+
+def alignment_angles(n: jax.Array) -> jax.Array:
+    """[eps_x, eps_y] (radians): Rx(eps_x) then Ry(eps_y) take the unit normal n to [0,0,1]."""
+    ex = jnp.arctan2(n[1], n[2])
+    zp = jnp.sqrt(n[1] ** 2 + n[2] ** 2)
+    ey = jnp.arctan2(-n[0], zp)
+    return jnp.stack([ex, ey])
+
+
+def alignment_matrix(eps: jax.Array) -> jax.Array:
+    """Paper 2 eq. 3: Align = Ry(eps_y) Rx(eps_x)."""
+    cx, sx = jnp.cos(eps[0]), jnp.sin(eps[0])
+    cy, sy = jnp.cos(eps[1]), jnp.sin(eps[1])
+    z = jnp.zeros_like(cx)
+    return jnp.stack(
+        [
+            jnp.stack([cy, sy * sx, sy * cx]),
+            jnp.stack([z, cx, -sx]),
+            jnp.stack([-sy, sx * cy, cx * cy]),
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class PlaneAlignment:
+    """Result of :func:`plane_alignment` for one sensor."""
+
+    matrix: np.ndarray
+    """Align (3 x 3): multiply the sensor's (compensated) vectors by it."""
+    eps_x_deg: float
+    eps_y_deg: float
+    normal: np.ndarray
+    """The turning axis in the sensor frame."""
+    plane: np.ndarray
+    """[alpha, beta, gamma] of z = alpha x + beta y + gamma."""
+    circle_radius: float
+    """Radius of the circle the tips draw, relative to the mean vector length."""
+    out_of_plane: float
+    """RMS distance of the tips from the plane, relative to the circle radius."""
+    turn_deg: float
+    """How much of the circle the tips cover (10-degree bins), degrees."""
+    method: str
+    """'plane' (paper 2) or 'mean_direction' (the vector lies along the axis)."""
+    is_rotation: bool
+    message: str
+    warnings: list[str] = field(default_factory=list)
+
+
+def plane_alignment(
+    v: np.ndarray,
+    *,
+    max_out_of_plane: float = 0.15,
+    min_turn_deg: float = 270.0,
+    min_circle: float = 0.05,
+) -> PlaneAlignment:
+    """Paper 2's sensor-plane alignment from a turn about the board's z axis.
+
+    Parameters
+    ----------
+    v : (N, 3)
+        One sensor's vectors during the turn, compensated (ellipsoid) first: the soft-iron
+        matrix changes the plane's normal, so align after compensating, as the paper does.
+    max_out_of_plane : float
+        Largest RMS distance from the plane, relative to the circle's radius, for the
+        recording to count as a turn about one axis.
+    min_turn_deg : float
+        Smallest part of the circle that must be covered.
+    min_circle : float
+        A circle smaller than this (relative to |v|) means the vector lies along the axis:
+        the mean direction is the axis then.
+
+    ``is_rotation`` is False (with the reason in ``message``) when the recording is not such a
+    turn; the matrix is still computed, but do not use it.
+    """
+    v = np.asarray(v, float)
+    v = v[np.all(np.isfinite(v), axis=1)]
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 10:
+        raise ValueError(f"need at least 10 finite (N, 3) vectors, got shape {v.shape}")
+    scale = float(np.mean(np.linalg.norm(v, axis=1)))
+    centroid = v.mean(axis=0)
+    spread = float(np.sqrt(np.mean(np.sum((v - centroid) ** 2, axis=1))))
+    circle = spread / scale
+    warn: list[str] = []
+    if circle < min_circle:
+        n = centroid / np.linalg.norm(centroid)
+        n = n if n[2] >= 0 else -n
+        coef = np.array([-n[0] / n[2], -n[1] / n[2], 0.0])
+        eps = np.asarray(alignment_angles(jnp.asarray(n)))
+        A = np.asarray(alignment_matrix(jnp.asarray(eps)))
+        return PlaneAlignment(
+            matrix=A,
+            eps_x_deg=float(np.degrees(eps[0])),
+            eps_y_deg=float(np.degrees(eps[1])),
+            normal=n,
+            plane=coef,
+            circle_radius=circle,
+            out_of_plane=float("nan"),
+            turn_deg=float("nan"),
+            method="mean_direction",
+            is_rotation=True,
+            message=(
+                f"the vector stays within {100 * circle:.1f} % of its length of one direction "
+                "(it lies along the turning axis, e.g. gravity on a level plane): its mean "
+                "direction is taken as the axis; the turn itself cannot be checked"
+            ),
+        )
+    coef = np.asarray(fit_plane(jnp.asarray(v)))
+    n = np.asarray(plane_normal(jnp.asarray(coef)))
+    dist = (v - centroid) @ n
+    oop = float(np.sqrt(np.mean(dist**2)) / spread)
+    # angular coverage around the axis
+    e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    d = v - centroid
+    ang = np.degrees(np.arctan2(d @ e2, d @ e1)) % 360.0
+    turn = 10.0 * len(np.unique((ang // 10).astype(int)))
+    eps = np.asarray(alignment_angles(jnp.asarray(n)))
+    A = np.asarray(alignment_matrix(jnp.asarray(eps)))
+    problems = []
+    if oop > max_out_of_plane:
+        problems.append(
+            f"the tips leave the plane by {100 * oop:.0f} % of the circle radius (limit "
+            f"{100 * max_out_of_plane:.0f} %): the board was not turned about one axis with its "
+            "XY plane held on a fixed plane"
+        )
+    if turn < min_turn_deg:
+        problems.append(
+            f"the tips cover {turn:.0f} degrees of the circle (need {min_turn_deg:.0f}): turn "
+            "the board through a full revolution"
+        )
+    if abs(n[2]) < 0.5:
+        warn.append(
+            f"the turning axis {np.round(n, 3)} is far from the sensor's z axis: is this the "
+            "right sensor and the right turn?"
+        )
+    return PlaneAlignment(
+        matrix=A,
+        eps_x_deg=float(np.degrees(eps[0])),
+        eps_y_deg=float(np.degrees(eps[1])),
+        normal=n,
+        plane=coef,
+        circle_radius=circle,
+        out_of_plane=oop,
+        turn_deg=turn,
+        method="plane",
+        is_rotation=not problems,
+        message="; ".join(problems) if problems else "a turn about one axis",
+        warnings=warn,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# accel-mag alignment
+
+
+def dip_residual(p: jax.Array, data) -> jax.Array:
+    """e_i = a_i . exp([v]x) P m_i - beta, p = [v (3), beta]; a, m unit vectors (N, 3)."""
+    a, m, P = data
+    R = rotvec_to_dcm(p[:3]) @ P
+    return jnp.einsum("ni,ij,nj->n", a, R, m) - p[3]
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled_dip(max_iter: int):
+    def solve(p0, a, m, P, w):
+        return lm_solve(dip_residual, p0, (a, m, P), weights=w, update_type=1, max_iter=max_iter)
+
+    return jax.jit(solve)
+
+
+@dataclass(frozen=True)
+class MagAccelAlignment:
+    """Rotation from the magnetometer frame to the accelerometer frame: m_acc = R m_mag."""
+
+    R_acc_from_mag: np.ndarray
+    permutation: np.ndarray
+    """The signed axis permutation found first (identity when the axes already agree)."""
+    permutation_text: str
+    rotation_deg: float
+    """Angle of R P^T: the small rotation left after the permutation, degrees."""
+    dip_deg: float
+    """Inclination of the field (theta - 90 deg, positive: field points down)."""
+    dip_stderr_deg: float
+    spread_before_deg: float
+    """Std of the gravity-field angle over the samples used, before (R = I)."""
+    spread_after_deg: float
+    rotvec_stderr_deg: np.ndarray
+    n_used: int
+    n_total: int
+    status: str
+    message: str
+    permutation_scores: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    def apply(self, mag: np.ndarray) -> np.ndarray:
+        """Magnetometer vectors expressed in the accelerometer frame."""
+        return np.asarray(mag, float) @ self.R_acc_from_mag.T
+
+
+def _angles_deg(a: np.ndarray, m: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arccos(np.clip(np.sum(a * m, axis=1), -1.0, 1.0)))
+
+
+def align_mag_to_accel(
+    acc: np.ndarray,
+    mag: np.ndarray,
+    *,
+    static_tol: float = 0.05,
+    search_permutations: bool = True,
+    max_iter: int = 100,
+) -> MagAccelAlignment:
+    """Estimate R (magnetometer -> accelerometer frame) from the constant gravity-field angle.
+
+    Parameters
+    ----------
+    acc, mag : (N, 3)
+        Simultaneous calibrated accelerometer and magnetometer vectors (any units), covering
+        many orientations. Samples whose |a| or |m| differs from its median by more than
+        ``static_tol`` (relative) are left out: a moving sensor's accelerometer sees more than
+        gravity, and a disturbed field changes the angle.
+    search_permutations : bool
+        Score the 48 signed axis permutations first (swapped or negated magnetometer axes).
+    """
+    acc = np.asarray(acc, float)
+    mag = np.asarray(mag, float)
+    if acc.shape != mag.shape or acc.ndim != 2 or acc.shape[1] != 3:
+        raise ValueError(f"acc and mag must both be (N, 3), got {acc.shape} and {mag.shape}")
+    ok = np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
+    na = np.linalg.norm(acc, axis=1)
+    nm = np.linalg.norm(mag, axis=1)
+    ok &= np.abs(na / np.median(na[ok]) - 1.0) < static_tol
+    ok &= np.abs(nm / np.median(nm[ok]) - 1.0) < static_tol
+    warn = []
+    if ok.sum() < 50:
+        raise ValueError(
+            f"only {int(ok.sum())} samples have |a| and |m| within {100 * static_tol:.0f} % of "
+            "their medians; record slower motion or raise static_tol"
+        )
+    a = acc[ok] / na[ok, None]
+    m = mag[ok] / nm[ok, None]
+    # orientation diversity: the rotation is unobservable about a direction all a_i share
+    evals = np.linalg.eigvalsh(a.T @ a / len(a))
+    if evals[1] < 0.01:
+        raise ValueError(
+            "gravity stays in about one direction (or one plane) in the sensor frame: the "
+            "rotation about it is unobservable. Tilt the sensor through many orientations"
+        )
+    Ps = signed_permutations() if search_permutations else np.eye(3)[None]
+    spreads = np.array([np.std(np.sum(a * (m @ P.T), axis=1)) for P in Ps])
+    best = int(np.argmin(spreads))
+    P = Ps[best]
+    scores = {describe_permutation(Q): float(s) for Q, s in zip(Ps, spreads, strict=True)}
+    if best != 0:
+        warn.append(
+            f"the magnetometer axes look permuted against the accelerometer: {describe_permutation(P)}"
+            f" (det {np.linalg.det(P):+.0f}; spread of a.m {spreads[best]:.4f} against "
+            f"{spreads[0]:.4f} unpermuted)"
+        )
+    beta0 = float(np.mean(np.sum(a * (m @ P.T), axis=1)))
+    p0 = jnp.asarray(np.array([0.0, 0.0, 0.0, beta0]))
+    w = np.ones(len(a))
+    res = _compiled_dip(max_iter)(
+        p0, jnp.asarray(a), jnp.asarray(m), jnp.asarray(P), jnp.asarray(w)
+    )
+    p = np.asarray(res.params)
+    R = np.asarray(rotvec_to_dcm(jnp.asarray(p[:3]))) @ P
+    theta = np.degrees(np.arccos(np.clip(p[3], -1.0, 1.0)))
+    se = np.asarray(res.stderr)
+    dip_se = float(np.degrees(se[3] / np.sqrt(max(1e-300, 1.0 - p[3] ** 2))))
+    before = _angles_deg(a, m)
+    after = _angles_deg(a, m @ R.T)
+    status = "ok" if is_converged(int(res.status)) else "not_converged"
+    if status == "ok" and np.any(np.degrees(se[:3]) > 1.0):
+        status = "poorly_determined"
+        warn.append(
+            "the rotation is poorly determined (std. error above 1 degree); cover more orientations"
+        )
+    return MagAccelAlignment(
+        R_acc_from_mag=R,
+        permutation=P,
+        permutation_text=describe_permutation(P),
+        rotation_deg=rotation_angle_deg(R @ P.T),
+        dip_deg=float(theta - 90.0),
+        dip_stderr_deg=dip_se,
+        spread_before_deg=float(np.std(before)),
+        spread_after_deg=float(np.std(after)),
+        rotvec_stderr_deg=np.degrees(se[:3]),
+        n_used=int(ok.sum()),
+        n_total=len(acc),
+        status=status,
+        message=status_message(int(res.status)),
+        permutation_scores=scores,
+        warnings=warn,
+    )
