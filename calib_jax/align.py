@@ -302,9 +302,9 @@ def align_mag_to_accel(
     scores = {describe_permutation(Q): float(s) for Q, s in zip(Ps, spreads, strict=True)}
     if best != 0:
         warn.append(
-            f"the magnetometer axes look permuted against the accelerometer: {describe_permutation(P)}"
-            f" (det {np.linalg.det(P):+.0f}; spread of a.m {spreads[best]:.4f} against "
-            f"{spreads[0]:.4f} unpermuted)"
+            "the magnetometer axes look permuted against the accelerometer: "
+            f"{describe_permutation(P)} (det {np.linalg.det(P):+.0f}; spread of a.m "
+            f"{spreads[best]:.4f} against {spreads[0]:.4f} unpermuted)"
         )
     beta0 = float(np.mean(np.sum(a * (m @ P.T), axis=1)))
     p0 = jnp.asarray(np.array([0.0, 0.0, 0.0, beta0]))

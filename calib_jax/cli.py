@@ -1,4 +1,4 @@
-"""Command line: ``calib-jax accel FILE ...`` and ``calib-jax demo``."""
+"""Command line: ``calib-jax accel FILE``, ``calib-jax mag FILE`` and ``calib-jax demo``."""
 
 from __future__ import annotations
 
@@ -47,6 +47,32 @@ def run_accel(args: argparse.Namespace) -> int:
     print(cal.report())
     _json_out(cal, args.json)
     _plot(cal, args.plot)
+    return 0 if cal.success else 1
+
+
+def run_mag(args: argparse.Namespace) -> int:
+    _enable_x64()
+    from .io import load_log
+    from .mag import calibrate_mag
+
+    log = load_log(args.file, columns=args.columns, sample_rate=args.sample_rate)
+    cal = calibrate_mag(
+        log,
+        model=args.model,
+        field=args.field,
+        units=args.units,
+        sensor=args.sensor,
+        solver=args.solver,
+        sensor_id=args.sensor_id,
+    )
+    print(f"calib-jax mag: {args.file}")
+    print(cal.report())
+    _json_out(cal, args.json)
+    if args.plot:
+        from .plots import plot_mag
+
+        plot_mag(cal, log.mag if args.sensor == "mag" else log.acc, args.plot)
+        print(f"wrote {args.plot}")
     return 0 if cal.success else 1
 
 
@@ -106,6 +132,29 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--json", default=None, help="write the calibration JSON here")
     a.add_argument("--plot", default=None, help="write a PNG figure here")
     a.set_defaults(func=run_accel)
+
+    m = sub.add_parser(
+        "mag", help="ellipsoid (hard/soft iron) calibration from a free-rotation log (paper 2)"
+    )
+    m.add_argument("file")
+    m.add_argument(
+        "--model",
+        default="auto",
+        choices=["sphere", "diag", "full", "auto"],
+        help="hard iron only, axis-aligned ellipsoid, full ellipsoid, or the lowest BIC",
+    )
+    m.add_argument(
+        "--field", type=float, default=None, help="known field magnitude (sets the output scale)"
+    )
+    m.add_argument("--units", default=None, help="label of the raw units (report only)")
+    m.add_argument("--sensor", default="mag", choices=["mag", "accel"], help="which columns to fit")
+    m.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
+    m.add_argument("--columns", default=None, help="e.g. mx,my,mz or mx=MagX,my=MagY,mz=MagZ")
+    m.add_argument("--sample-rate", type=float, default=None, help="Hz, if the log has no time")
+    m.add_argument("--sensor-id", default=None)
+    m.add_argument("--json", default=None, help="write the calibration JSON here")
+    m.add_argument("--plot", default=None, help="write a PNG figure here")
+    m.set_defaults(func=run_mag)
 
     d = sub.add_parser("demo", help="calibrate the Xsens log shipped with the package")
     d.add_argument("--out", default="calib_jax_demo", help="folder for the JSON and the figure")

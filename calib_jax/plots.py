@@ -59,3 +59,43 @@ def plot_accel(cal: AccelCalibration, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_mag(cal, raw: np.ndarray, path: str) -> None:
+    """Paper 2 Fig. 8: raw samples (centred on their mean, scaled to the radius) and the
+    compensated ones, with the sphere; plus the histogram of |m| / radius before and after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    raw = np.asarray(raw, float)
+    raw = raw[np.all(np.isfinite(raw), axis=1)]
+    step = max(1, len(raw) // 3000)
+    raw = raw[::step]
+    centred = raw - raw.mean(axis=0)
+    before = centred / np.linalg.norm(centred, axis=1).mean()
+    after = cal.apply(raw) / cal.radius
+    fig = plt.figure(figsize=(11, 5))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
+    ax.plot_wireframe(
+        np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.8", linewidth=0.4
+    )
+    ax.scatter(*before.T, color="tab:blue", s=2, alpha=0.5, label="raw (centred, scaled)")
+    ax.scatter(*after.T, color="tab:red", s=2, alpha=0.5, label="compensated")
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_title(f"{cal.model} ellipsoid, {cal.n_samples} samples", fontsize=9)
+    ax.legend(loc="upper left", fontsize=8)
+    ax2 = fig.add_subplot(1, 2, 2)
+    bins = np.linspace(0.5, 1.5, 101)
+    ax2.hist(np.linalg.norm(before, axis=1), bins=bins, alpha=0.6, label="raw")
+    ax2.hist(np.linalg.norm(after, axis=1), bins=bins, alpha=0.6, label="compensated")
+    ax2.set_xlabel("|m| / radius")
+    ax2.set_title(
+        f"RMS radial error {cal.rms_before_pct:.2f} % -> {cal.rms_after_pct:.2f} %", fontsize=9
+    )
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
