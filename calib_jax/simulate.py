@@ -291,16 +291,20 @@ def simulate_marg(
     dip_deg: float = 65.0,
     R_acc_board: np.ndarray | None = None,
     R_mag_board: np.ndarray | None = None,
+    acc_center: np.ndarray | None = None,
+    acc_soft_iron: np.ndarray | None = None,
     acc_noise: float = 2e-3,
     mag_noise: float = 0.2,
     sample_rate: float = 100.0,
     rng: np.random.Generator | int = 0,
 ) -> SimulatedMARG:
-    """Accelerometer (g, already calibrated) and raw magnetometer along an attitude path.
+    """Accelerometer (g) and raw magnetometer along an attitude path.
 
     The accelerometer reads the upward specific force (static: no linear acceleration), the
     magnetometer the field [0, cos dip, -sin dip] * field in ENU, each in its own frame,
-    the magnetometer through the ellipsoid (raw = W^-1 m + center), plus white noise.
+    the magnetometer through the ellipsoid (raw = W^-1 m + center), the accelerometer through
+    its own (``acc_center``, ``acc_soft_iron``; default none: already calibrated), plus white
+    noise.
     """
     rng = np.random.default_rng(rng)
     C = _quat_to_dcm_np(np.asarray(quat, float))  # body -> nav
@@ -316,8 +320,13 @@ def simulate_marg(
     a_s = a_body @ Ra  # Ra' a  (row vectors)
     m_s = m_body @ Rm
     raw_m = m_s @ np.linalg.inv(W).T + c
+    raw_a = a_s
+    if acc_soft_iron is not None:
+        raw_a = raw_a @ np.linalg.inv(np.asarray(acc_soft_iron, float)).T
+    if acc_center is not None:
+        raw_a = raw_a + np.asarray(acc_center, float)
     return SimulatedMARG(
-        acc=a_s + rng.normal(scale=acc_noise, size=a_s.shape),
+        acc=raw_a + rng.normal(scale=acc_noise, size=a_s.shape),
         mag=raw_m + rng.normal(scale=mag_noise, size=raw_m.shape),
         quat=np.asarray(quat, float),
         acc_true=a_s,
