@@ -293,6 +293,9 @@ class MagCalibration:
     n_samples: int
     coverage: float
     """Fraction of 100 equal-area cells of the sphere of directions holding data."""
+    rms_raw_pct: float = float("nan")
+    """RMS of (|m| - mean |m|) / mean |m| of the raw data, not centred: the error of data that
+    was calibrated before (a centred 'before' penalises it for uneven coverage)."""
     field: float | None = None
     units: str | None = None
     sensor: str = "mag"
@@ -330,8 +333,8 @@ class MagCalibration:
             "semi-axes: " + ", ".join(f"{v:.6g}" for v in self.semi_axes) + f" {unit}; "
             f"radius after {self.radius:.6g}"
             + ("" if self.field is not None else f" {unit} (det W = 1)"),
-            f"RMS of (|m| - r)/r: before {self.rms_before_pct:.3f} %, "
-            f"after {self.rms_after_pct:.3f} %",
+            f"RMS of (|m| - r)/r: before {self.rms_before_pct:.3f} % (centred on the data "
+            f"mean; {self.rms_raw_pct:.3f} % uncentred), after {self.rms_after_pct:.3f} %",
             f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations); "
             f"condition {self.condition:.3g}; status: {self.status}",
         ]
@@ -364,6 +367,7 @@ class MagCalibration:
                 "status": self.status,
                 "rms_before_pct": self.rms_before_pct,
                 "rms_after_pct": self.rms_after_pct,
+                "rms_raw_pct": self.rms_raw_pct,
                 "semi_axes": np.asarray(self.semi_axes).tolist(),
                 "dcm": np.asarray(self.dcm).tolist(),
                 "stderr": {
@@ -411,6 +415,7 @@ class MagCalibration:
             status=d["status"],
             rms_before_pct=float(d["rms_before_pct"]),
             rms_after_pct=float(d["rms_after_pct"]),
+            rms_raw_pct=float(d.get("rms_raw_pct", "nan")),
             semi_axes=arr(d["semi_axes"]),
             dcm=arr(d["dcm"]),
             stderr_center=arr(d["stderr"]["center"]),

@@ -56,6 +56,9 @@ POOR_STDERR = 1e-2
 # coverage: smallest eigenvalue of the direction scatter (1/3 for a uniform sphere, 0 for a
 # circle in one plane); below FLAT the shape along the normal is unobservable
 FLAT = 0.01
+# a fitted mean radius this many times the data's RMS radius means the ellipsoid ran away
+# (partial coverage lets a huge ellipsoid pass through a cap of data)
+RUNAWAY = 10.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -263,9 +266,21 @@ def calibrate_mag(
         ms = float(np.mean(e**2))
         bic = n * np.log(max(ms, 1e-300)) + N_PARAMS[m] * np.log(n)
         fits[m] = (res, np.asarray(c_n), np.asarray(M_n), ms, bic)
-    selection = {m: {"bic": f[4], "rms_pct": 100 * np.sqrt(f[3])} for m, f in fits.items()}
+    usable = {
+        m: f
+        for m, f in fits.items()
+        if is_converged(int(f[0].status)) and natural_radius(jnp.asarray(f[2])) < RUNAWAY
+    }
+    selection = {
+        m: {"bic": f[4], "rms_pct": 100 * np.sqrt(f[3]), "usable": m in usable}
+        for m, f in fits.items()
+    }
     # rms_pct: RMS radial error in percent of the data's RMS radius s
-    chosen = min(fits, key=lambda m: fits[m][4]) if model == "auto" else model
+    if model == "auto":
+        # the lowest BIC among fits that converged to a bounded ellipsoid; sphere otherwise
+        chosen = min(usable, key=lambda m: usable[m][4]) if usable else "sphere"
+    else:
+        chosen = model
     res, c_n, M_n, _, _ = fits[chosen]
 
     centre = mean + s * c_n
@@ -287,8 +302,18 @@ def calibrate_mag(
     se_n = np.asarray(res.stderr, float)
 
     solver_status = int(res.status)
-    if solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED) or not np.all(
-        np.isfinite(W)
+    runaway = not float(natural_radius(jnp.asarray(M_n))) < RUNAWAY
+    if runaway:
+        r_fit = float(natural_radius(jnp.asarray(M)))
+        warn.append(
+            f"the {chosen} ellipsoid ran away (mean radius {r_fit:.4g} against a data radius "
+            f"of {s:.4g}): the data cover too little of the sphere "
+            "for this model; use model='sphere' or record more orientations"
+        )
+    if (
+        solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED)
+        or not np.all(np.isfinite(W))
+        or runaway
     ):
         status = "failed"
     elif not is_converged(solver_status):
@@ -307,6 +332,8 @@ def calibrate_mag(
 
     r0 = np.linalg.norm(xv - mean, axis=1)
     before = r0 / r0.mean() - 1.0
+    nr = np.linalg.norm(xv, axis=1)
+    raw_err = nr / nr.mean() - 1.0
     after = np.linalg.norm((xv - centre) @ W.T, axis=1) / radius - 1.0
     cal = MagCalibration(
         center=centre,
@@ -316,6 +343,7 @@ def calibrate_mag(
         status=status,
         rms_before_pct=float(100 * np.sqrt(np.mean(before**2))),
         rms_after_pct=float(100 * np.sqrt(np.mean(after**2))),
+        rms_raw_pct=float(100 * np.sqrt(np.mean(raw_err**2))),
         semi_axes=semi_axes,
         dcm=R,
         stderr_center=stderr_center,
