@@ -90,8 +90,11 @@ def ellipsoid_fit_constrained(
     Mr = S11 - S12 @ S22inv_S21
     Mr = 0.5 * (Mr + Mr.T)
     d, V = eigh_small(Mr)
-    d_ok = jnp.all(d > 0)
-    H = (V / jnp.sqrt(jnp.where(d > 0, d, 1.0))) @ V.T
+    # noise-free data make Mr singular (the exact quadric is its null vector): floor the
+    # eigenvalues at round-off, so the null direction dominates H C H as it should
+    floor = 1e-13 * jnp.max(d)
+    d_ok = jnp.all(d > -1e-9 * jnp.max(d)) & (jnp.max(d) > 0)
+    H = (V / jnp.sqrt(jnp.maximum(d, floor))) @ V.T
     h = k / 2.0 - 1.0
     C = jnp.zeros((6, 6), x.dtype)
     C = C.at[:3, :3].set(jnp.array([[-1.0, h, h], [h, -1.0, h], [h, h, -1.0]], x.dtype))

@@ -239,7 +239,7 @@ def calibrate_mag(
     cs, _ = sphere_fit(jnp.asarray(xn), jnp.ones(len(xn)))
     d = xn - np.asarray(cs)
     dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    frac, min_eig, unseen = sphere_coverage(dirs)
+    _, min_eig, unseen = sphere_coverage(dirs)
     if min_eig < FLAT:
         raise ValueError(
             f"the field directions lie in one plane (normal {_vec(unseen)} in the sensor frame): "
@@ -247,13 +247,6 @@ def calibrate_mag(
             "Tumble the sensor through all orientations; a one-axis turn is what the plane "
             "alignment (calib_jax.align.plane_alignment) needs instead"
         )
-    if frac < 0.3:
-        warn.append(
-            f"the data cover {100 * frac:.0f} % of the sphere of directions (unseen axis "
-            f"{_vec(unseen)}): the shape is poorly determined there; tumble through more "
-            "orientations"
-        )
-
     opts = tuple(sorted((solver_options or {}).items()))
     candidates = MAG_MODELS if model == "auto" else (model,)
     n = len(xn)
@@ -330,6 +323,16 @@ def calibrate_mag(
             + "; cover more orientations"
         )
 
+    # coverage on the calibrated sphere (directions from a sphere fit to distorted data
+    # overstate it)
+    y = (xv - centre) @ W.T
+    frac, _, unseen = sphere_coverage(y / np.linalg.norm(y, axis=1, keepdims=True))
+    if frac < 0.5:
+        warn.append(
+            f"the data cover {100 * frac:.0f} % of the sphere of directions (least seen axis "
+            f"{_vec(unseen)}): the shape is poorly determined there; tumble through more "
+            "orientations"
+        )
     r0 = np.linalg.norm(xv - mean, axis=1)
     before = r0 / r0.mean() - 1.0
     nr = np.linalg.norm(xv, axis=1)

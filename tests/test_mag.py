@@ -1,0 +1,320 @@
+"""Ellipsoid calibration (paper 2, 2.2): geometry, the pure core, calibrate_mag, bad input."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from calib_jax.accel import calibrate_accel
+from calib_jax.calibration import MagCalibration
+from calib_jax.geometry import (
+    compensation_matrix,
+    ellipsoid_fit_constrained,
+    ellipsoid_from_quadric,
+    quadric_matrix,
+)
+from calib_jax.lm import is_converged
+from calib_jax.mag import calibrate_mag, fit_ellipsoid_normalized
+from calib_jax.models.mag import (
+    MAG_MODELS,
+    natural_radius,
+    pack,
+    quadric_residual,
+    soft_iron_matrix,
+    unpack,
+)
+from calib_jax.simulate import random_directions, random_ellipsoid, random_rotation
+
+N = 600  # one padded size (1024) for every simulated fit here: one compilation per model
+
+
+def ellipsoid_points(seed, n=N, noise=0.005, radius=1.0, dirs=None, **kw):
+    """Samples raw = W^-1 y + c, |y| = radius, with white noise ``noise * radius``."""
+    rng = np.random.default_rng(seed)
+    c, W = random_ellipsoid(rng, radius=radius, **kw)
+    y = (random_directions(n, rng) if dirs is None else dirs) * radius
+    raw = y @ np.linalg.inv(W).T + c
+    return raw + rng.normal(scale=noise * radius, size=raw.shape), c, W
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry
+
+
+@given(seed=st.integers(0, 10_000), cap=st.sampled_from([-1.0, 0.0, 0.5, 0.8]))
+def test_constrained_fit_is_always_an_ellipsoid(seed, cap):
+    """Li-Griffiths never returns a hyperboloid, even from a small cap of noisy data, where the
+    unconstrained quadric often is one."""
+    rng = np.random.default_rng(seed)
+    d = random_directions(4000, rng)
+    d = d[d[:, 2] > cap][:300]
+    x, _, _ = ellipsoid_points(seed, n=len(d), noise=0.02, dirs=d, center_spread=0.0)
+    x = (x - x.mean(0)) / np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, 1)))
+    c, M, ok = ellipsoid_fit_constrained(jnp.asarray(x), jnp.ones(len(x)))
+    assert bool(ok)
+    assert np.all(np.linalg.eigvalsh(np.asarray(M)) > 0)
+
+
+def test_constrained_fit_exact_on_noise_free_data():
+    """Noise-free points of an ellipsoid within the k = 4 class: the fit is exact (round-off)."""
+    x, c, W = ellipsoid_points(3, noise=0.0, axis_spread=0.25, center_spread=0.2)
+    cf, M, ok = ellipsoid_fit_constrained(jnp.asarray(x), jnp.ones(N))
+    assert bool(ok)
+    np.testing.assert_allclose(np.asarray(cf), c, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(M), W.T @ W, atol=1e-9)
+
+
+@given(seed=st.integers(0, 10_000))
+def test_paper2_eigen_analysis_round_trip(seed):
+    """Eq. 6-20: the matrix form S, translated and normalised, gives back the centre and shape;
+    R D R' = A, R is a rotation, and the compensation R diag(r/axes) R' = r M^(1/2)."""
+    rng = np.random.default_rng(seed)
+    c, W = random_ellipsoid(rng, radius=1.0)
+    M = W.T @ W
+    S = quadric_matrix(jnp.asarray(c), jnp.asarray(M))
+    c2, A, R, axes = ellipsoid_from_quadric(S)
+    np.testing.assert_allclose(np.asarray(c2), c, atol=1e-10)
+    np.testing.assert_allclose(np.asarray(A), M, atol=1e-10)
+    R = np.asarray(R)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-10)
+    assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-10)
+    np.testing.assert_allclose(R @ np.diag(np.asarray(axes) ** -2.0) @ R.T, M, atol=1e-10)
+    comp = compensation_matrix(jnp.asarray(R), axes, 2.0)
+    np.testing.assert_allclose(np.asarray(comp), np.asarray(soft_iron_matrix(M, 2.0)), atol=1e-10)
+    # a point of the ellipsoid maps onto the sphere of radius 2
+    y = random_directions(5, rng)
+    x = y @ np.linalg.inv(W).T + c
+    np.testing.assert_allclose(np.linalg.norm((x - c) @ np.asarray(comp).T, axis=1), 2.0)
+
+
+@pytest.mark.parametrize("model", MAG_MODELS)
+def test_pack_unpack_and_jacobian(model, tol):
+    """The log-Cholesky packing round-trips, and the exact Jacobian of the quadric residual
+    matches central differences (Tol.FD_ABS)."""
+    rng = np.random.default_rng(0)
+    c, W = random_ellipsoid(rng)
+    M = W.T @ W
+    if model == "sphere":
+        M = np.eye(3) * 1.3
+    elif model == "diag":
+        M = np.diag(np.diag(M))
+    p = pack(jnp.asarray(c), jnp.asarray(M), model)
+    c2, M2 = unpack(p, model)
+    np.testing.assert_allclose(np.asarray(c2), c, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(M2), M, atol=1e-12)
+    x = jnp.asarray(rng.normal(size=(20, 3)))
+    J = jax.jacfwd(quadric_residual)(p, x, model)
+    h = 1e-6
+    fd = np.stack(
+        [
+            (
+                quadric_residual(p.at[k].add(h), x, model)
+                - quadric_residual(p.at[k].add(-h), x, model)
+            )
+            / (2 * h)
+            for k in range(len(p))
+        ],
+        axis=1,
+    )
+    np.testing.assert_allclose(np.asarray(J), fd, atol=tol.FD_ABS)
+
+
+# ---------------------------------------------------------------------------------------------
+# the pure core
+
+
+def _normalised(seed, noise=0.005):
+    x, _, _ = ellipsoid_points(seed, noise=noise)
+    m = x.mean(0)
+    s = np.sqrt(np.mean(np.sum((x - m) ** 2, 1)))
+    return (x - m) / s
+
+
+def test_vmap_equals_loop():
+    """Three sensors in one vmapped call give the per-sensor results (float64 round-off)."""
+    xs = np.stack([_normalised(k) for k in range(3)])
+    w = np.ones(N)
+    fit = jax.jit(jax.vmap(lambda x, w: fit_ellipsoid_normalized(x, w, "full")))
+    batch = fit(jnp.asarray(xs), jnp.asarray(np.stack([w] * 3)))
+    one = jax.jit(lambda x, w: fit_ellipsoid_normalized(x, w, "full"))
+    for k in range(3):
+        r = one(jnp.asarray(xs[k]), jnp.asarray(w))
+        np.testing.assert_allclose(np.asarray(batch.params[k]), np.asarray(r.params), rtol=1e-9)
+        # both converged; which test fired first can differ by round-off between the batched
+        # and the single compilation
+        assert is_converged(int(batch.status[k])) and is_converged(int(r.status))
+
+
+def test_lm_agrees_with_optimistix_and_scipy(tol):
+    """Same quadric residual, three solvers: the same minimum (Tol.CHI2_REL on chi2, 1e-7 on
+    the parameters: the minimum is well conditioned, cond ~ 10)."""
+    from scipy.optimize import least_squares
+
+    x = _normalised(11)
+    w = np.ones(N)
+    ours = fit_ellipsoid_normalized(jnp.asarray(x), jnp.asarray(w), "full", "lm1")
+    ox = fit_ellipsoid_normalized(jnp.asarray(x), jnp.asarray(w), "full", "optimistix")
+    ref = least_squares(
+        lambda p: np.asarray(quadric_residual(jnp.asarray(p), jnp.asarray(x), "full")),
+        np.asarray(ours.params) + 1e-3,
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
+    np.testing.assert_allclose(float(ours.chi2), float(ox.chi2), rtol=tol.CHI2_REL)
+    np.testing.assert_allclose(float(ours.chi2), 2 * ref.cost, rtol=tol.CHI2_REL)
+    np.testing.assert_allclose(np.asarray(ours.params), ref.x, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(ours.params), np.asarray(ox.params), rtol=1e-7, atol=1e-9)
+
+
+def test_sphere_on_elongated_data_stays_at_the_data_size():
+    """A sphere through elongated data (axes 1 : 1.5 : 2.2, the QMC5883L case) keeps a radius
+    of the data's size (the real-data test shows the unscaled residual running away)."""
+    rng = np.random.default_rng(5)
+    d = random_directions(N, rng)
+    x = d * np.array([1.0, 1.5, 2.2]) + rng.normal(scale=0.05, size=d.shape)
+    x = (x - x.mean(0)) / np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, 1)))
+    r = fit_ellipsoid_normalized(jnp.asarray(x), jnp.ones(N), "sphere")
+    _, M = unpack(r.params, "sphere")
+    assert 0.5 < float(natural_radius(M)) < 2.0
+
+
+# ---------------------------------------------------------------------------------------------
+# calibrate_mag
+
+
+@given(
+    seed=st.integers(0, 10_000),
+    noise=st.sampled_from([0.002, 0.01, 0.03]),
+    radius=st.sampled_from([0.5, 45.0, 6000.0]),
+)
+def test_recovers_random_ellipsoids(seed, noise, radius, tol):
+    """Centre and W within N_SIGMA standard errors of the truth (plus 1e-4 of the radius for the
+    O(noise^2) bias of a quadric residual), at any scale (gauss, uT, counts)."""
+    x, c, W = ellipsoid_points(seed, noise=noise, radius=radius)
+    cal = calibrate_mag(x, model="full", field=radius)
+    assert cal.status == "ok", cal.report()
+    slack = 1e-4 * radius + 3 * noise**2 * radius
+    assert np.all(np.abs(cal.center - c) < tol.N_SIGMA * cal.stderr_center + slack)
+    assert np.all(np.abs(cal.soft_iron - W) < tol.N_SIGMA * cal.stderr_soft_iron / radius + 1e-4)
+    # the after-RMS is the raw noise seen through W: radially, noise * sqrt(tr(W W') / 3) on
+    # average over directions (15 %: the sample RMS of 600 residuals and the direction mix)
+    expected = 100 * noise * np.sqrt(np.trace(W @ W.T) / 3)
+    assert cal.rms_after_pct == pytest.approx(expected, rel=0.15)
+    assert cal.rms_before_pct > cal.rms_after_pct
+
+
+def test_auto_prefers_the_simplest_true_model():
+    """BIC picks the sphere for a pure hard-iron offset, diag for axis-aligned gains and full
+    for a rotated ellipsoid (noise 0.5 %, 600 samples)."""
+    rng = np.random.default_rng(2)
+    y = random_directions(N, rng)
+    noise = rng.normal(scale=0.005, size=y.shape)
+    c = np.array([0.3, -0.2, 0.1])
+    sphere = y + c + noise
+    diag = y * np.array([1.0, 1.2, 0.85]) + c + noise
+    R = random_rotation(3, 60)
+    full = (y * np.array([1.0, 1.2, 0.85])) @ R.T + c + noise
+    assert calibrate_mag(sphere).model == "sphere"
+    assert calibrate_mag(diag).model == "diag"
+    assert calibrate_mag(full).model == "full"
+
+
+def test_field_sets_the_output_scale():
+    """Without a field, det W = 1 (magcal); with one, |W (x - c)| = field; centres agree."""
+    x, _, _ = ellipsoid_points(4, radius=300.0)
+    a = calibrate_mag(x, model="full")
+    b = calibrate_mag(x, model="full", field=44.3)
+    assert np.linalg.det(a.soft_iron) == pytest.approx(1.0, rel=1e-9)
+    np.testing.assert_allclose(a.center, b.center, rtol=1e-9)
+    np.testing.assert_allclose(b.soft_iron, a.soft_iron * 44.3 / a.radius, rtol=1e-9)
+    assert np.median(np.linalg.norm(b.apply(x), axis=1)) == pytest.approx(44.3, rel=0.01)
+
+
+def test_partial_coverage_warns_and_widens_errors(tol):
+    """Data from a 60-degree cap: a warning, larger standard errors, and the truth still
+    within them (the fit is honest about what the poses cannot pin down)."""
+    rng = np.random.default_rng(8)
+    d = random_directions(20000, rng)
+    cap = d[d[:, 2] > 0.5][:N]
+    full = random_directions(N, rng)
+    xc, c, W = ellipsoid_points(8, dirs=cap, noise=0.005)
+    xf, _, _ = ellipsoid_points(8, dirs=full, noise=0.005)
+    a = calibrate_mag(xc, model="full", field=1.0)
+    b = calibrate_mag(xf, model="full", field=1.0)
+    assert any("cover" in w for w in a.warnings)
+    assert a.coverage < 0.5 < b.coverage
+    assert np.all(a.stderr_center > 3 * b.stderr_center)
+    if a.status in ("ok", "poorly_determined"):
+        assert np.all(np.abs(a.center - c) < tol.N_SIGMA * a.stderr_center + 1e-3)
+
+
+def test_one_axis_turn_is_rejected_with_the_fix():
+    t = np.linspace(0, 2 * np.pi, 500)
+    x = np.stack([np.cos(t), np.sin(t), 0.3 + 0 * t], 1) + 0.001 * np.random.default_rng(0).normal(
+        size=(500, 3)
+    )
+    with pytest.raises(ValueError, match="one plane.*Tumble"):
+        calibrate_mag(x)
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (np.zeros((100, 2)), "must be \\(samples, 3\\)"),
+        (np.full((100, 3), np.nan), "only 0 finite samples"),
+        (np.ones((100, 3)), "identical"),
+    ],
+)
+def test_bad_input(bad, match):
+    with pytest.raises(ValueError, match=match):
+        calibrate_mag(bad)
+
+
+def test_bad_options():
+    x, _, _ = ellipsoid_points(0)
+    with pytest.raises(ValueError, match="model must be"):
+        calibrate_mag(x, model="ellipse")
+    with pytest.raises(ValueError, match="field must be a positive"):
+        calibrate_mag(x, field=-1.0)
+
+
+def test_nan_rows_are_counted_not_fatal():
+    x, _, _ = ellipsoid_points(1)
+    x[::50] = np.nan
+    cal = calibrate_mag(x, model="full")
+    assert cal.n_samples == N - len(x[::50])
+    assert any("NaN" in w for w in cal.warnings)
+
+
+def test_json_round_trip(tmp_path):
+    x, _, _ = ellipsoid_points(2)
+    cal = calibrate_mag(x, model="full", field=1.0, units="gauss", sensor_id="board-7")
+    cal.save(tmp_path / "m.json")
+    d = json.loads((tmp_path / "m.json").read_text())
+    for key in ("center", "soft_iron", "radius", "model", "status", "rms_before_pct"):
+        assert key in d
+    back = MagCalibration.load(tmp_path / "m.json")
+    np.testing.assert_array_equal(back.apply(x), cal.apply(x))
+    assert back.sensor_id == "board-7" and back.model == "full"
+    d["format_version"] = 99
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="format_version"):
+        MagCalibration.load(tmp_path / "bad.json")
+
+
+def test_full_ellipsoid_matches_paper1_on_accelerometer(sim48):
+    """Paper 2 applies the ellipsoid to every sensor; on static accelerometer means the full
+    ellipsoid with field = g is paper 1's nine-parameter family (W = alpha^-1 in the
+    correction direction). Both fits agree to well within their standard errors."""
+    acc = calibrate_accel(sim48.raw, sample_rate=sim48.sample_rate, window=25, min_samples=40)
+    ell = calibrate_mag(acc.static_means, model="full", field=1.0, sensor="accel")
+    alpha = np.asarray(acc.to_params().alpha)
+    np.testing.assert_allclose(ell.center, acc.bias, atol=3 * acc.stderr[6:9].max())
+    np.testing.assert_allclose(ell.soft_iron, np.linalg.inv(alpha), atol=3 * acc.stderr[:6].max())
+    assert ell.rms_after_pct / 100 == pytest.approx(acc.rms_after, rel=0.05)
