@@ -3,6 +3,11 @@
 Public API (re-exports only; each concept lives in its own module):
 
 - :func:`calibrate_accel`: raw log -> :class:`AccelCalibration` (paper 1, end to end).
+- :func:`calibrate_mag`: free-rotation log -> :class:`MagCalibration` (paper 2 ellipsoid).
+- :func:`calibrate_marg`, :func:`evaluate_turn`: paper 2's routine and its evaluation.
+- :mod:`calib_jax.align`: sensor-plane alignment, accel-mag rotation.
+- :mod:`calib_jax.attitude`: Gauss-Newton quaternion attitude from accelerometer + magnetometer.
+- :mod:`calib_jax.models.mag`: the ellipsoid model and its quadric residual.
 - :mod:`calib_jax.models.accel`: the nine-parameter model, ``correct``, ``sphere_residual``.
 - :mod:`calib_jax.lm`: Gavin's Levenberg-Marquardt (``lm_solve``) and ``optx_solve``.
 - :mod:`calib_jax.static`: static-interval detection.
@@ -11,16 +16,32 @@ Public API (re-exports only; each concept lives in its own module):
 """
 
 from .accel import calibrate_accel, fit_normalized, initial_guess
-from .calibration import AccelCalibration
-from .datasets import demo_log_path
+from .align import align_mag_to_accel, plane_alignment
+from .attitude import estimate_attitude, gauss_newton_quaternion
+from .calibration import AccelCalibration, MagCalibration
+from .datasets import broad_excerpt_path, demo_log_path, load_broad_excerpt, mag_demo_log_path
 from .io import SensorLog, load_log
 from .lm import LMResult, Status, lm_solve, optx_solve
+from .mag import calibrate_mag, fit_ellipsoid_normalized
+from .marg import calibrate_marg, evaluate_turn
 from .models.accel import AccelParams, correct, distort, sphere_residual
 from .static import StaticReport, detect_static
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "MagCalibration",
+    "align_mag_to_accel",
+    "broad_excerpt_path",
+    "calibrate_mag",
+    "calibrate_marg",
+    "estimate_attitude",
+    "evaluate_turn",
+    "fit_ellipsoid_normalized",
+    "gauss_newton_quaternion",
+    "load_broad_excerpt",
+    "mag_demo_log_path",
+    "plane_alignment",
     "AccelCalibration",
     "AccelParams",
     "LMResult",

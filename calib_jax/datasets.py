@@ -13,3 +13,40 @@ def demo_log_path() -> Path:
     text with columns t, ax, ay, az; imu_tk calibrates it with g = 9.81744 m/s^2.
     """
     return Path(str(resources.files("calib_jax") / "data" / "imutk_xsens" / "xsens_acc.mat"))
+
+
+def mag_demo_log_path() -> Path:
+    """CK-Explorer accelerometer + magnetometer tumble (12,000 samples, acc in g and already
+    calibrated, magnetometer raw with a large hard iron; Apache-2.0). See
+    ``data/ckexplorer_accmag/NOTES.md``. Columns ax, ay, az, mx, my, mz."""
+    return Path(
+        str(resources.files("calib_jax") / "data" / "ckexplorer_accmag" / "acc_mag_log.csv")
+    )
+
+
+def broad_excerpt_path() -> Path:
+    """Every 10th sample of BROAD trial 02 (CC-BY-4.0, Laidig et al. 2021), CSV with t,
+    acc (m/s^2), mag (uT), optical quaternion qw..qz (sensor -> ENU) and movement. See
+    ``data/broad_excerpt/NOTES.md``."""
+    return Path(
+        str(
+            resources.files("calib_jax")
+            / "data"
+            / "broad_excerpt"
+            / "02_undisturbed_slow_rotation_B_every10.csv"
+        )
+    )
+
+
+def load_broad_excerpt() -> dict:
+    """The BROAD excerpt as arrays: t, acc, mag, quat (NaN rows kept), movement (bool)."""
+    import numpy as np
+
+    d = np.genfromtxt(broad_excerpt_path(), delimiter=",", names=True)
+    return {
+        "t": d["t"],
+        "acc": np.column_stack([d["ax"], d["ay"], d["az"]]),
+        "mag": np.column_stack([d["mx"], d["my"], d["mz"]]),
+        "quat": np.column_stack([d["qw"], d["qx"], d["qy"], d["qz"]]),
+        "movement": d["movement"].astype(bool),
+    }
