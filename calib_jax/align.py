@@ -264,6 +264,7 @@ def align_mag_to_accel(
     *,
     static_tol: float = 0.05,
     search_permutations: bool = True,
+    hemisphere: str | None = None,
     max_iter: int = 100,
 ) -> MagAccelAlignment:
     """Estimate R (magnetometer -> accelerometer frame) from the constant gravity-field angle.
@@ -277,6 +278,11 @@ def align_mag_to_accel(
         gravity, and a disturbed field changes the angle.
     search_permutations : bool
         Score the 48 signed axis permutations first (swapped or negated magnetometer axes).
+    hemisphere : {"north", "south"}, optional
+        Where the recording was made (north: the field points down, dip > 0). The angle
+        constancy cannot tell P from -P (the angle becomes 180 deg minus itself, the dip
+        changes sign), so without it the permutation with det +1 is preferred, which is right
+        unless the magnetometer's frame is left-handed against the accelerometer's.
     """
     acc = np.asarray(acc, float)
     mag = np.asarray(mag, float)
@@ -303,8 +309,18 @@ def align_mag_to_accel(
             "rotation about it is unobservable. Tilt the sensor through many orientations"
         )
     Ps = signed_permutations() if search_permutations else np.eye(3)[None]
+    if hemisphere not in (None, "north", "south"):
+        raise ValueError(f"hemisphere must be 'north', 'south' or None, got {hemisphere!r}")
     spreads = np.array([np.std(np.sum(a * (m @ P.T), axis=1)) for P in Ps])
-    best = int(np.argmin(spreads))
+    means = np.array([np.mean(np.sum(a * (m @ P.T), axis=1)) for P in Ps])
+    # P and -P have the same spread: break the tie by the dip sign (cos(theta) < 0 means
+    # theta > 90, dip > 0, north) or else by det +1
+    if hemisphere is not None:
+        want_negative = hemisphere == "north"
+        tie = np.where((means < 0) == want_negative, 0.0, 1.0)
+    else:
+        tie = np.where(np.linalg.det(Ps) > 0, 0.0, 1.0)
+    best = int(np.lexsort((tie, np.round(spreads, 12)))[0])
     P = Ps[best]
     scores = {describe_permutation(Q): float(s) for Q, s in zip(Ps, spreads, strict=True)}
     if best != 0:

@@ -114,7 +114,7 @@ def heading_inclination_error_deg(q_est: jax.Array, q_ref: jax.Array) -> jax.Arr
     head = 2.0 * jnp.arctan2(jnp.abs(e[3]), e[0])
     qh = jnp.stack([jnp.cos(head / 2), 0.0 * e[0], 0.0 * e[0], jnp.sign(e[3]) * jnp.sin(head / 2)])
     qi = quat_multiply(quat_conj(qh), e)
-    incl = 2.0 * jnp.arccos(jnp.clip(jnp.abs(qi[0]), 0.0, 1.0))
+    incl = 2.0 * jnp.arctan2(jnp.linalg.norm(qi[1:]), jnp.abs(qi[0]))  # arccos loses 1e-8 rad
     return jnp.degrees(jnp.stack([head, incl]))
 
 
