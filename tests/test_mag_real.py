@@ -1,0 +1,178 @@
+"""Magnetometer, alignment and attitude on real logs (each folder's NOTES.md says what it is)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import calib_jax as cj
+from calib_jax.cli import main
+from calib_jax.lm import lm_solve
+from calib_jax.models.mag import natural_radius, unpack
+from calib_jax.rotations import heading_inclination_error_deg
+
+from .conftest import shared_file
+
+herr = jax.jit(jax.vmap(heading_inclination_error_deg))
+
+
+def heading_incl(q_est, q_ref):
+    ok = np.all(np.isfinite(q_ref), axis=1)
+    return np.asarray(herr(jnp.asarray(q_est)[ok], jnp.asarray(q_ref[ok])))
+
+
+# ---------------------------------------------------------------------------------------------
+# QMC5883L against its published calibration
+
+
+@pytest.fixture(scope="module")
+def qmc_reference():
+    ref = np.loadtxt(
+        shared_file("tomisuarez_qmc5883l_mag/reference/paramters_mag.csv"), delimiter=","
+    ).ravel()
+    return ref[:9].reshape(3, 3), ref[9:]
+
+
+@pytest.fixture(scope="module")
+def qmc_noisy():
+    return cj.load_log(shared_file("tomisuarez_qmc5883l_mag/noisy_raw_data.csv"))
+
+
+def test_qmc_matches_published_calibration(qmc_noisy, qmc_reference):
+    """Same data as the authors' fit (Dorveaux, m_cal = A m + B): the same RMS radial error
+    (6.19 % both; ours is the minimum of a slightly different cost, so within 1 %), the same
+    centre within 1 % of the radius (measured 0.5 %), and the same shape within 5 % (measured
+    2.3 %, after removing the rotation A leaves free: compare A'A)."""
+    A, B = qmc_reference
+    cal = cj.calibrate_mag(qmc_noisy, model="auto")
+    assert cal.status == "ok" and cal.model == "full", cal.report()
+    assert cal.n_samples == 22743 and cal.rms_before_pct > 25  # NOTES.md: |m| +- 9 % raw
+    y = qmc_noisy.mag @ A.T + B
+    n = np.linalg.norm(y, axis=1)
+    ref_rms = 100 * np.sqrt(np.mean((n / n.mean() - 1) ** 2))
+    assert ref_rms == pytest.approx(6.2, abs=0.1)  # NOTES.md: 0.996 +- 6.2 %
+    assert cal.rms_after_pct == pytest.approx(ref_rms, rel=0.01)
+    assert cal.rms_after_pct <= ref_rms + 1e-3
+    c_ref = -np.linalg.solve(A, B)
+    assert np.all(np.abs(cal.center - c_ref) < 0.01 * cal.radius)
+    Wn = cal.soft_iron / cal.radius
+    Mo, Mr = Wn @ Wn, A.T @ A
+    Mo, Mr = Mo / np.linalg.det(Mo) ** (1 / 3), Mr / np.linalg.det(Mr) ** (1 / 3)
+    assert np.abs(Mo - Mr).max() < 0.05
+    # NOTES.md: radii 749 / 1029 / 1626 counts from an algebraic fit
+    np.testing.assert_allclose(np.sort(cal.semi_axes), [749, 1029, 1626], rtol=0.05)
+
+
+def test_qmc_sphere_needs_the_scaled_residual(qmc_noisy):
+    """On this strongly anisotropic sensor a sphere with the plain quadric residual q - 1 runs
+    away to a huge radius (a sphere far away fits a cap with a small relative error); the
+    radius-scaled residual keeps it at the data's size."""
+    cal = cj.calibrate_mag(qmc_noisy, model="sphere")
+    assert cal.status == "ok"
+    assert 800 < cal.radius < 1600  # semi-axes 749..1626 counts
+    x = qmc_noisy.mag
+    xn = (x - x.mean(0)) / np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, 1)))
+
+    def unscaled(p, data):
+        c, M = unpack(p, "sphere")
+        d = data - c
+        return jnp.einsum("ni,ij,nj->n", d, M, d) - 1.0
+
+    res = lm_solve(unscaled, jnp.zeros(4), jnp.asarray(xn), max_iter=200)
+    _, M = unpack(res.params, "sphere")
+    assert float(natural_radius(M)) > 20  # in units of the data's RMS radius
+
+
+def test_qmc_cli_json(tmp_path, capsys):
+    path = shared_file("tomisuarez_qmc5883l_mag/filtered_raw_data.csv")
+    out = tmp_path / "m.json"
+    assert main(["mag", str(path), "--json", str(out), "--model", "full"]) == 0
+    import json
+
+    d = json.loads(out.read_text())
+    assert d["model"] == "full" and d["status"] == "ok"
+    assert np.array(d["soft_iron"]).shape == (3, 3)
+    assert d["rms_after_pct"] < 3.0 < 25.0 < d["rms_before_pct"]  # measured 2.80 / 29.3
+
+
+# ---------------------------------------------------------------------------------------------
+# CK-Explorer accelerometer + magnetometer tumble (shipped with the package)
+
+
+@pytest.fixture(scope="module")
+def ck():
+    return cj.load_log(cj.mag_demo_log_path())
+
+
+@pytest.fixture(scope="module")
+def ck_cal(ck):
+    return cj.calibrate_mag(ck)
+
+
+def test_ck_magnetometer(ck_cal):
+    """NOTES.md's independent ellipsoid fit: centre (0.148, 0.390, -0.059), radii 0.298 /
+    0.303 / 0.325, residual 1.27 %."""
+    cal = ck_cal
+    assert cal.status == "ok" and cal.model == "full"
+    np.testing.assert_allclose(cal.center, [0.148, 0.390, -0.059], atol=2e-3)
+    np.testing.assert_allclose(np.sort(cal.semi_axes), [0.298, 0.303, 0.325], atol=3e-3)
+    assert cal.rms_after_pct == pytest.approx(1.27, abs=0.05)
+    assert cal.model_selection["full"]["bic"] < cal.model_selection["diag"]["bic"]
+
+
+def test_ck_accel_mag_angle(ck, ck_cal):
+    """NOTES.md: angle between accelerometer and corrected magnetometer 72.1 +- 2.9 deg, so
+    |dip| about 18 deg. The rotation fit narrows the spread only a little (2.49 -> 2.43 deg
+    measured on the 81 % of samples within 5 % of the median norms): the spread is mostly the
+    gentle tumble's linear acceleration and noise, not misalignment. The estimated rotation
+    (about 1 deg) is small and determined to better than 0.1 deg."""
+    al = cj.align_mag_to_accel(ck.acc, ck_cal.apply(ck.mag))
+    assert al.status == "ok"
+    assert al.permutation_text == "x <- +x, y <- +y, z <- +z"
+    assert al.dip_deg == pytest.approx(-17.9, abs=0.5)
+    assert al.spread_after_deg <= al.spread_before_deg
+    assert al.rotation_deg < 3.0
+    assert np.all(al.rotvec_stderr_deg < 0.1)
+
+
+# ---------------------------------------------------------------------------------------------
+# BROAD: attitude against optical ground truth
+
+
+def test_broad_excerpt_attitude_against_optical_truth():
+    """Gauss-Newton attitude from the shipped excerpt of trial 02 (manufacturer-calibrated):
+    median heading error 3.0 deg and inclination error 1.2 deg measured against the optical
+    truth (slow rotations; the accelerometer sees some motion). Limits: 4 and 2 deg."""
+    d = cj.load_broad_excerpt()
+    att = cj.estimate_attitude(d["acc"], d["mag"])
+    assert float(att.dip_deg) == pytest.approx(69.5, abs=1.0)  # NOTES.md: dip about 69 deg
+    e = heading_incl(att.quat, d["quat"])
+    assert np.median(e[:, 0]) < 4.0
+    assert np.median(e[:, 1]) < 2.0
+
+
+@pytest.fixture(scope="module")
+def broad34():
+    pytest.importorskip("h5py")
+    from calib_jax.io.broad import load_broad
+
+    return load_broad(shared_file("broad_myon/34_disturbed_attached_magnet_3cm.hdf5"))
+
+
+def test_broad_magnet_hard_iron_held_out(broad34):
+    """Trial 34, magnet attached 40-100 s: fit the ellipsoid on alternate 5 s blocks, judge the
+    heading on the others. Measured: median heading error 23.7 deg raw -> 13.6 deg calibrated
+    (full model). The disturbance is not a clean ellipsoid (NOTES.md), so much stays
+    unexplained; the test asserts the calibration at least removes a quarter of it."""
+    seg = broad34.segment(40, 100)
+    blk = (np.arange(len(seg.acc)) // int(5 * seg.sample_rate)) % 2 == 0
+    cal = cj.calibrate_mag(seg.mag[blk], field=44.3)
+    assert cal.success
+    assert cal.center[2] > 5.0  # NOTES.md: the centre moves to about (-1.8, 0.3, 19) uT
+    test = ~blk
+    dip = 68.7  # from the undisturbed first 38 s
+    raw = cj.estimate_attitude(seg.acc[test], seg.mag[test], dip_deg=dip)
+    fixed = cj.estimate_attitude(seg.acc[test], cal.apply(seg.mag[test]), dip_deg=dip)
+    e_raw = np.median(heading_incl(raw.quat, seg.quat[test])[:, 0])
+    e_cal = np.median(heading_incl(fixed.quat, seg.quat[test])[:, 0])
+    assert e_cal < 0.75 * e_raw
