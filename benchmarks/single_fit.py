@@ -34,8 +34,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=30)
     args = ap.parse_args()
-    log = simulate_accel(random_params(0), samples_per_pose=100, transition_samples=0,
-                         noise=2e-3, rng=0)
+    log = simulate_accel(
+        random_params(0), samples_per_pose=100, transition_samples=0, noise=2e-3, rng=0
+    )
     x = log.raw[log.static][:4800]
     x = jnp.asarray(x)
     w = jnp.ones(len(x))
@@ -54,8 +55,11 @@ def main() -> None:
             r.params.block_until_ready()
             times.append(time.perf_counter() - t0)
         rows[f"calib_jax {solver}"] = dict(
-            median_ms=1e3 * float(np.median(times)), compile_s=compile_s,
-            iterations=int(r.iterations), chi2=float(r.chi2), params=np.asarray(r.params).tolist(),
+            median_ms=1e3 * float(np.median(times)),
+            compile_s=compile_s,
+            iterations=int(r.iterations),
+            chi2=float(r.chi2),
+            params=np.asarray(r.params).tolist(),
         )
 
     f = jax.jit(lambda p: normalized_sphere_residual(p, x, 1.0))
@@ -67,27 +71,46 @@ def main() -> None:
         times = []
         for _ in range(args.repeats):
             t0 = time.perf_counter()
-            ref = least_squares(lambda p: np.asarray(f(p)), p0, jac=lambda p: np.asarray(J(p)),
-                                method=method, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+            ref = least_squares(
+                lambda p: np.asarray(f(p)),
+                p0,
+                jac=lambda p: np.asarray(J(p)),
+                method=method,
+                xtol=1e-15,
+                ftol=1e-15,
+                gtol=1e-15,
+            )
             times.append(time.perf_counter() - t0)
         rows[f"scipy {method}"] = dict(
-            median_ms=1e3 * float(np.median(times)), compile_s=0.0, iterations=int(ref.nfev),
-            chi2=float(2 * ref.cost), params=ref.x.tolist(),
+            median_ms=1e3 * float(np.median(times)),
+            compile_s=0.0,
+            iterations=int(ref.nfev),
+            chi2=float(2 * ref.cost),
+            params=ref.x.tolist(),
         )
     base = rows["scipy lm"]["median_ms"]
-    print(f"single fit, {len(x)} samples, median of {args.repeats} warm runs "
-          f"({platform.machine()}, jax {jax.__version__})")
-    print(f"{'solver':<22}{'median ms':>10}{'vs scipy lm':>13}{'compile s':>11}{'iter/nfev':>11}"
-          f"{'chi2 - scipy':>14}")
+    print(
+        f"single fit, {len(x)} samples, median of {args.repeats} warm runs "
+        f"({platform.machine()}, jax {jax.__version__})"
+    )
+    print(
+        f"{'solver':<22}{'median ms':>10}{'vs scipy lm':>13}{'compile s':>11}{'iter/nfev':>11}"
+        f"{'chi2 - scipy':>14}"
+    )
     for name, r in rows.items():
         r["speedup_vs_scipy_lm"] = base / r["median_ms"]
-        print(f"{name:<22}{r['median_ms']:>10.2f}{r['speedup_vs_scipy_lm']:>12.2f}x"
-              f"{r['compile_s']:>11.2f}{r['iterations']:>11d}"
-              f"{r['chi2'] - rows['scipy lm']['chi2']:>14.2e}")
+        print(
+            f"{name:<22}{r['median_ms']:>10.2f}{r['speedup_vs_scipy_lm']:>12.2f}x"
+            f"{r['compile_s']:>11.2f}{r['iterations']:>11d}"
+            f"{r['chi2'] - rows['scipy lm']['chi2']:>14.2e}"
+        )
     out = Path(__file__).parent / "results"
     out.mkdir(exist_ok=True)
-    (out / "single_fit.json").write_text(json.dumps(
-        dict(samples=len(x), repeats=args.repeats, jax=jax.__version__, rows=rows), indent=2))
+    (out / "single_fit.json").write_text(
+        json.dumps(
+            dict(samples=len(x), repeats=args.repeats, jax=jax.__version__, rows=rows), indent=2
+        )
+    )
     print(f"wrote {out / 'single_fit.json'}")
 
 

@@ -55,6 +55,15 @@ class MARGCalibration:
             m = self.mag_to_acc.apply(m)
         return a, m
 
+    def aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Both: the magnetometer rotated into the accelerometer frame (3 degrees of freedom
+        from the dip constancy), then both sensors by the accelerometer's plane alignment
+        (its tilt against the board). The most complete correction here."""
+        a, m = self.rotation_aligned(acc, mag)
+        if self.acc_plane is not None:
+            a, m = a @ self.acc_plane.matrix.T, m @ self.acc_plane.matrix.T
+        return a, m
+
 
 def calibrate_marg(
     tumble_acc: np.ndarray,
