@@ -331,7 +331,13 @@ def align_mag_to_accel(
         )
     theta0 = float(np.mean(np.arccos(np.clip(np.sum(a * (m @ P.T), axis=1), -1.0, 1.0))))
     p0 = jnp.asarray(np.array([0.0, 0.0, 0.0, theta0]))
-    w = np.ones(len(a))
+    # pad to a power of two with zero weights: one compilation for logs of similar length
+    n = len(a)
+    size = max(64, 1 << int(np.ceil(np.log2(n))))
+    w = np.zeros(size)
+    w[:n] = 1.0
+    a = np.concatenate([a, np.repeat(a[:1], size - n, axis=0)])
+    m = np.concatenate([m, np.repeat(m[:1], size - n, axis=0)])
     res = _compiled_dip(max_iter)(
         p0, jnp.asarray(a), jnp.asarray(m), jnp.asarray(P), jnp.asarray(w)
     )
@@ -340,6 +346,7 @@ def align_mag_to_accel(
     theta = np.degrees(p[3])
     se = np.asarray(res.stderr)
     dip_se = float(np.degrees(se[3]))
+    a, m = a[:n], m[:n]
     before = _angles_deg(a, m)
     after = _angles_deg(a, m @ R.T)
     status = "ok" if is_converged(int(res.status)) else "not_converged"

@@ -154,5 +154,11 @@ def estimate_attitude(
     else:
         dip = dip_from_data(np.asarray(acc), np.asarray(mag)) if dip_deg is None else dip_deg
         r_a, r_m = reference_vectors(dip)
-    q, eul, F = _batch(acc, mag, r_a, r_m, iterations)
-    return Attitude(quat=q, euler_deg=eul, cost=F, dip_deg=jnp.asarray(dip))
+    # pad to a power of two (repeating a row) so that logs of similar length share a compilation
+    n = acc.shape[0]
+    size = max(64, 1 << int(np.ceil(np.log2(max(n, 1)))))
+    pad = jnp.zeros((size - n,), int)
+    q, eul, F = _batch(
+        jnp.concatenate([acc, acc[pad]]), jnp.concatenate([mag, mag[pad]]), r_a, r_m, iterations
+    )
+    return Attitude(quat=q[:n], euler_deg=eul[:n], cost=F[:n], dip_deg=jnp.asarray(dip))

@@ -322,17 +322,22 @@ class MagCalibration:
     def report(self) -> str:
         unit = self.units or "raw units"
         c, sc = self.center, self.stderr_center
+        mag = self.sensor == "mag"
         out = [
             f"model {self.model} on {self.n_samples} samples "
             f"({100 * self.coverage:.0f} % of the sphere of directions covered)",
-            "center (hard iron): "
+            ("center (hard iron): " if mag else "center (bias): ")
             + ", ".join(f"{v:.6g} +- {e:.2g}" for v, e in zip(c, sc, strict=True))
             + f" {unit}",
-            "soft iron W:",
+            "soft iron W:" if mag else "gain and cross-axis matrix W:",
             *("  " + "  ".join(f"{v:+.6f}" for v in row) for row in self.soft_iron),
             "semi-axes: " + ", ".join(f"{v:.6g}" for v in self.semi_axes) + f" {unit}; "
             f"radius after {self.radius:.6g}"
-            + ("" if self.field is not None else f" {unit} (det W = 1)"),
+            + (
+                " (the given field magnitude, in its units)"
+                if self.field is not None
+                else f" {unit} (det W = 1)"
+            ),
             f"RMS of (|m| - r)/r: before {self.rms_before_pct:.3f} % (centred on the data "
             f"mean; {self.rms_raw_pct:.3f} % uncentred), after {self.rms_after_pct:.3f} %",
             f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations); "

@@ -127,14 +127,11 @@ class TurnEvaluation:
     cost: np.ndarray
 
 
-def evaluate_turn(
-    versions: dict[str, tuple[np.ndarray, np.ndarray]], dip_deg: float | None = None
-) -> dict[str, TurnEvaluation]:
+def evaluate_turn(versions: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, TurnEvaluation]:
     """Attitude of each (acc, mag) version of a turn about the board's z axis (paper 2, 3).
 
     The reference vectors are the version's own first samples (``reference="first"``), so the
-    ideal attitude is a pure yaw: roll = pitch = 0. ``dip_deg`` is unused then, kept for the
-    earth-frame variant.
+    ideal attitude is a pure yaw: roll = pitch = 0.
     """
     out = {}
     for label, (a, m) in versions.items():

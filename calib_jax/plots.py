@@ -22,15 +22,12 @@ def plot_accel(cal: AccelCalibration, path: str) -> None:
     with the unit sphere. Right: the 2-D projection (theta, phi) of the corrected means,
     showing which orientations the log covers.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: leaves the caller's backend alone
 
     raw_means = cal.static_means
     before = (raw_means - cal.nominal_offset) / cal.nominal_scale / cal.g
     after = cal.apply(raw_means) / cal.g
-    fig = plt.figure(figsize=(11, 5))
+    fig = Figure(figsize=(11, 5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
     ax.plot_wireframe(
@@ -58,16 +55,12 @@ def plot_accel(cal: AccelCalibration, path: str) -> None:
     ax2.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_mag(cal, raw: np.ndarray, path: str) -> None:
     """Paper 2 Fig. 8: raw samples (centred on their mean, scaled to the radius) and the
     compensated ones, with the sphere; plus the histogram of |m| / radius before and after."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: leaves the caller's backend alone
 
     raw = np.asarray(raw, float)
     raw = raw[np.all(np.isfinite(raw), axis=1)]
@@ -76,7 +69,7 @@ def plot_mag(cal, raw: np.ndarray, path: str) -> None:
     centred = raw - raw.mean(axis=0)
     before = centred / np.linalg.norm(centred, axis=1).mean()
     after = cal.apply(raw) / cal.radius
-    fig = plt.figure(figsize=(11, 5))
+    fig = Figure(figsize=(11, 5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
     ax.plot_wireframe(
@@ -98,4 +91,3 @@ def plot_mag(cal, raw: np.ndarray, path: str) -> None:
     ax2.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
