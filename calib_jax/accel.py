@@ -35,6 +35,7 @@ from .geometry import ellipsoid_fit, sphere_fit, sqrtm_inv_spd
 from .io.files import SensorLog
 from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
 from .models.accel import PARAM_NAMES, normalized_sphere_residual
+from .padding import pad_rows
 from .static import StaticReport, detect_static, distinct_directions
 
 G_STANDARD = 9.80665
@@ -133,10 +134,6 @@ def fit_normalized(
 @functools.lru_cache(maxsize=64)
 def _compiled(solver: str, model: str, options: tuple) -> callable:
     return jax.jit(functools.partial(fit_normalized, solver=solver, model=model, **dict(options)))
-
-
-def _bucket(n: int) -> int:
-    return max(64, 1 << int(np.ceil(np.log2(max(n, 1)))))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -390,12 +387,7 @@ def calibrate_accel(
     k = r_s
     xn = (pts - c_s) / k
     n = len(xn)
-    size = _bucket(n)
-    xpad = np.zeros((size, 3))
-    xpad[:n] = xn
-    xpad[n:] = xn[0]
-    wpad = np.zeros(size)
-    wpad[:n] = 1.0
+    xpad, wpad = pad_rows(xn)
     opts = tuple(sorted((solver_options or {}).items()))
     if jnp.zeros(()).dtype != jnp.float64:
         _warnings.warn(

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .lm import is_converged, lm_solve, status_message
+from .padding import pad_rows
 from .rotations import describe_permutation, rotation_angle_deg, rotvec_to_dcm, signed_permutations
 
 # ---------------------------------------------------------------------------------------------
@@ -333,11 +334,8 @@ def align_mag_to_accel(
     p0 = jnp.asarray(np.array([0.0, 0.0, 0.0, theta0]))
     # pad to a power of two with zero weights: one compilation for logs of similar length
     n = len(a)
-    size = max(64, 1 << int(np.ceil(np.log2(n))))
-    w = np.zeros(size)
-    w[:n] = 1.0
-    a = np.concatenate([a, np.repeat(a[:1], size - n, axis=0)])
-    m = np.concatenate([m, np.repeat(m[:1], size - n, axis=0)])
+    a, w = pad_rows(a)
+    m, _ = pad_rows(m)
     res = _compiled_dip(max_iter)(
         p0, jnp.asarray(a), jnp.asarray(m), jnp.asarray(P), jnp.asarray(w)
     )

@@ -29,6 +29,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .linalg import cho_solve_small
+from .padding import pad_rows
 from .rotations import dcm_to_quat, euler_zyx_deg, quat_normalize, quat_to_dcm
 
 
@@ -156,9 +157,11 @@ def estimate_attitude(
         r_a, r_m = reference_vectors(dip)
     # pad to a power of two (repeating a row) so that logs of similar length share a compilation
     n = acc.shape[0]
-    size = max(64, 1 << int(np.ceil(np.log2(max(n, 1)))))
-    pad = jnp.zeros((size - n,), int)
     q, eul, F = _batch(
-        jnp.concatenate([acc, acc[pad]]), jnp.concatenate([mag, mag[pad]]), r_a, r_m, iterations
+        jnp.asarray(pad_rows(np.asarray(acc))[0]),
+        jnp.asarray(pad_rows(np.asarray(mag))[0]),
+        r_a,
+        r_m,
+        iterations,
     )
     return Attitude(quat=q[:n], euler_deg=eul[:n], cost=F[:n], dip_deg=jnp.asarray(dip))

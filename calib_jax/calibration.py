@@ -178,12 +178,7 @@ class AccelCalibration:
 
     @classmethod
     def from_dict(cls, d: dict) -> AccelCalibration:
-        version = d.get("format_version")
-        if version != FORMAT_VERSION:
-            raise ValueError(
-                f"calibration format_version {version!r} is not supported (this calib_jax "
-                f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
-            )
+        _check_version(d)
         if d.get("model") not in MODELS:
             raise ValueError(f"not an accelerometer calibration: model is {d.get('model')!r}")
 
@@ -229,11 +224,7 @@ class AccelCalibration:
 
     @classmethod
     def load(cls, path: str | Path) -> AccelCalibration:
-        try:
-            d = json.loads(Path(path).read_text())
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
-        return cls.from_dict(d)
+        return cls.from_dict(_read_json(path))
 
 
 def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:
@@ -241,6 +232,22 @@ def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:
     ``models.accel.correct``)."""
     alpha = np.asarray(AccelParams.from_vector(jnp.asarray(params)).alpha)
     return (raw - params[6:9]) @ np.linalg.inv(alpha).T
+
+
+def _read_json(path: str | Path) -> dict:
+    try:
+        return json.loads(Path(path).read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
+
+
+def _check_version(d: dict) -> None:
+    version = d.get("format_version")
+    if version != FORMAT_VERSION:
+        raise ValueError(
+            f"calibration format_version {version!r} is not supported (this calib_jax "
+            f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
+        )
 
 
 def _sanitize(o):
@@ -397,12 +404,7 @@ class MagCalibration:
 
     @classmethod
     def from_dict(cls, d: dict) -> MagCalibration:
-        version = d.get("format_version")
-        if version != FORMAT_VERSION:
-            raise ValueError(
-                f"calibration format_version {version!r} is not supported (this calib_jax "
-                f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
-            )
+        _check_version(d)
         if d.get("kind") != "ellipsoid" or d.get("model") not in MAG_MODELS:
             raise ValueError(
                 f"not an ellipsoid calibration (kind {d.get('kind')!r}, model "
@@ -445,8 +447,4 @@ class MagCalibration:
 
     @classmethod
     def load(cls, path: str | Path) -> MagCalibration:
-        try:
-            d = json.loads(Path(path).read_text())
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
-        return cls.from_dict(d)
+        return cls.from_dict(_read_json(path))

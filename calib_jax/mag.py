@@ -47,6 +47,7 @@ from .models.mag import (
     soft_iron_matrix,
     unpack,
 )
+from .padding import pad_rows
 
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
 MagModel = Literal["sphere", "diag", "full", "auto"]
@@ -115,10 +116,6 @@ def _shape_jacobian(model: str):
     return jax.jit(jax.jacfwd(f))
 
 
-def _bucket(n: int) -> int:
-    return max(64, 1 << int(np.ceil(np.log2(max(n, 1)))))
-
-
 # ---------------------------------------------------------------------------------------------
 # host side
 
@@ -142,13 +139,7 @@ def _vec(v: np.ndarray) -> str:
 
 
 def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple) -> LMResult:
-    n = len(xn)
-    size = _bucket(n)
-    xpad = np.zeros((size, 3))
-    xpad[:n] = xn
-    xpad[n:] = xn[0]
-    wpad = np.zeros(size)
-    wpad[:n] = 1.0
+    xpad, wpad = pad_rows(xn)
     return _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
 
 
