@@ -31,7 +31,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .calibration import AccelCalibration, apply_params
-from .geometry import ellipsoid_fit, sphere_fit, sqrtm_inv_spd
+from .geometry import (
+    ellipsoid_fit_moments,
+    moments,
+    sphere_fit,
+    sphere_fit_moments,
+    sqrtm_inv_spd,
+)
 from .io.files import SensorLog
 from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
 from .models.accel import PARAM_NAMES, normalized_sphere_residual
@@ -69,13 +75,18 @@ def initial_guess(x: jax.Array, w: jax.Array) -> jax.Array:
 
     x is centred and scaled to about unit radius. Returns p_n (9,).
     """
-    c, M, ok = ellipsoid_fit(x, w)
-    alpha = sqrtm_inv_spd(jnp.where(ok, M, jnp.eye(3, dtype=x.dtype)))
+    return initial_guess_moments(moments(x, w))
+
+
+def initial_guess_moments(S: jax.Array) -> jax.Array:
+    """:func:`initial_guess` from the moment matrix of the (normalised) samples."""
+    c, M, ok = ellipsoid_fit_moments(S)
+    alpha = sqrtm_inv_spd(jnp.where(ok, M, jnp.eye(3, dtype=S.dtype)))
     p_ell = jnp.concatenate(
         [jnp.diag(alpha), jnp.stack([alpha[0, 1], alpha[0, 2], alpha[1, 2]]), c]
     )
-    cs, r = sphere_fit(x, w)
-    p_sph = jnp.concatenate([jnp.full(3, r), jnp.zeros(3, x.dtype), cs])
+    cs, r = sphere_fit_moments(S)
+    p_sph = jnp.concatenate([jnp.full(3, r), jnp.zeros(3, S.dtype), cs])
     use_ell = ok & jnp.all(jnp.isfinite(p_ell))
     return jnp.where(use_ell, p_ell, p_sph)
 

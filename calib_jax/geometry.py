@@ -4,37 +4,63 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .linalg import cho_solve_small, eigh_small, inv3
 
 
-def sphere_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Weighted algebraic sphere fit |x - c|^2 = r^2 (linear in c, r^2 - |c|^2).
+def monomials(x: jax.Array) -> jax.Array:
+    """phi(x) = [x^2, y^2, z^2, 2xy, 2xz, 2yz, x, y, z, 1] for samples (..., 3) -> (..., 10).
 
-    Returns (centre (3,), radius). Solves the 4x4 normal equations of
-    |x|^2 = 2 c.x + d, d = r^2 - |c|^2.
+    Every sphere and quadric residual here is linear in phi, so all the fits below (and the
+    batch LM of :mod:`calib_jax.batch`) need only the moment matrix of phi.
     """
-    A = jnp.concatenate([2.0 * x, jnp.ones((x.shape[0], 1), x.dtype)], axis=1)
-    b = jnp.sum(x * x, axis=1)
-    Aw = A * w[:, None]
-    sol = cho_solve_small(Aw.T @ A, Aw.T @ b)
+    X, Y, Z = x[..., 0], x[..., 1], x[..., 2]
+    return jnp.stack(
+        [X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, X, Y, Z, jnp.ones_like(X)], -1
+    )
+
+
+def moments(x: jax.Array, w: jax.Array) -> jax.Array:
+    """S = sum_i w_i phi(x_i) phi(x_i)' (10 x 10) for samples x (N, 3), weights w (N,)."""
+    P = monomials(x)
+    return (P * w[:, None]).T @ P
+
+
+def sphere_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Weighted algebraic sphere fit |x - c|^2 = r^2, see :func:`sphere_fit_moments`."""
+    return sphere_fit_moments(moments(x, w))
+
+
+def sphere_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Algebraic sphere fit from the moment matrix: |x|^2 = 2 c.x + d, d = r^2 - |c|^2.
+
+    The 4x4 normal equations use the columns [2x, 2y, 2z, 1] = phi[6:10] * [2, 2, 2, 1] and the
+    target |x|^2 = phi[0] + phi[1] + phi[2]. Returns (centre (3,), radius).
+    """
+    k = jnp.array([2.0, 2.0, 2.0, 1.0], S.dtype)
+    AtA = S[6:10, 6:10] * jnp.outer(k, k)
+    Atb = k * (S[6:10, 0] + S[6:10, 1] + S[6:10, 2])
+    sol = cho_solve_small(AtA, Atb)
     c, d = sol[:3], sol[3]
     return c, jnp.sqrt(jnp.maximum(d + c @ c, 0.0))
 
 
 def ellipsoid_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Weighted algebraic ellipsoid fit (x - c)' M (x - c) = 1 with M symmetric.
+    """Weighted algebraic ellipsoid fit, see :func:`ellipsoid_fit_moments`."""
+    return ellipsoid_fit_moments(moments(x, w))
 
-    Fits the quadric x' A x + v' x = 1 (nine unknowns) by linear least squares, then
-    c = -A^-1 v / 2 and M = A / (1 + c' A c). For a usable start, data should be centred and
-    scaled to about unit radius first. Returns (centre, M, ok) where ok says M is positive
-    definite (an ellipsoid, not a hyperboloid: with poor coverage the unconstrained quadric
-    can be either, and then the caller must fall back to a sphere).
+
+def ellipsoid_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Algebraic ellipsoid fit (x - c)' M (x - c) = 1 with M symmetric, from the moments.
+
+    Fits the quadric x' A x + v' x = 1 (nine unknowns, design phi[0:9]) by linear least
+    squares, then c = -A^-1 v / 2 and M = A / (1 + c' A c). For a usable start, data should be
+    centred and scaled to about unit radius first. Returns (centre, M, ok) where ok says M is
+    positive definite (an ellipsoid, not a hyperboloid: with poor coverage the unconstrained
+    quadric can be either, and then the caller must fall back to a sphere).
     """
-    X, Y, Z = x[:, 0], x[:, 1], x[:, 2]
-    D = jnp.stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, X, Y, Z], axis=1)
-    Dw = D * w[:, None]
-    u = cho_solve_small(Dw.T @ D, Dw.T @ jnp.ones_like(X))
+    u = cho_solve_small(S[:9, :9], S[:9, 9])
     A = jnp.array([[u[0], u[3], u[4]], [u[3], u[1], u[5]], [u[4], u[5], u[2]]])
     v = u[6:9]
     evals, evecs = eigh_small(A)
@@ -58,16 +84,23 @@ def sqrtm_inv_spd(M: jax.Array) -> jax.Array:
 # Paper 2, section 2.2: the quadric, its matrix form and its eigen-analysis
 
 
-def _design10(x: jax.Array) -> jax.Array:
-    X, Y, Z = x[:, 0], x[:, 1], x[:, 2]
-    one = jnp.ones_like(X)
-    return jnp.stack(
-        [X * X, Y * Y, Z * Z, 2 * Y * Z, 2 * X * Z, 2 * X * Y, 2 * X, 2 * Y, 2 * Z, one], axis=1
-    )
+# Li-Griffiths' design [x^2, y^2, z^2, 2yz, 2xz, 2xy, 2x, 2y, 2z, 1] = phi @ _LG
+_LG = np.zeros((10, 10))
+for _col, (_row, _k) in enumerate(
+    [(0, 1), (1, 1), (2, 1), (5, 1), (4, 1), (3, 1), (6, 2), (7, 2), (8, 2), (9, 1)]
+):
+    _LG[_row, _col] = _k
 
 
 def ellipsoid_fit_constrained(
     x: jax.Array, w: jax.Array, k: float = 4.0
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Ellipsoid-specific fit of samples, see :func:`ellipsoid_fit_constrained_moments`."""
+    return ellipsoid_fit_constrained_moments(moments(x, w), k)
+
+
+def ellipsoid_fit_constrained_moments(
+    Sphi: jax.Array, k: float = 4.0
 ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """Ellipsoid-specific algebraic fit (Li and Griffiths 2004), pure and jittable.
 
@@ -83,8 +116,8 @@ def ellipsoid_fit_constrained(
     x should be centred and scaled to about unit radius. Returns (centre, M, ok) with the
     ellipsoid ``(x - c)' M (x - c) = 1``; ok is False for degenerate data (a plane, a line).
     """
-    D = _design10(x)
-    S = (D * w[:, None]).T @ D
+    T = jnp.asarray(_LG, Sphi.dtype)
+    S = T.T @ Sphi @ T
     S11, S12, S22 = S[:6, :6], S[:6, 6:], S[6:, 6:]
     S22inv_S21 = jnp.stack([cho_solve_small(S22, S12.T[:, j]) for j in range(6)], axis=1)
     Mr = S11 - S12 @ S22inv_S21
@@ -96,9 +129,10 @@ def ellipsoid_fit_constrained(
     d_ok = jnp.all(d > -1e-9 * jnp.max(d)) & (jnp.max(d) > 0)
     H = (V / jnp.sqrt(jnp.maximum(d, floor))) @ V.T
     h = k / 2.0 - 1.0
-    C = jnp.zeros((6, 6), x.dtype)
-    C = C.at[:3, :3].set(jnp.array([[-1.0, h, h], [h, -1.0, h], [h, h, -1.0]], x.dtype))
-    C = C.at[3:, 3:].set(-k * jnp.eye(3, dtype=x.dtype))
+    dt = Sphi.dtype
+    C = jnp.zeros((6, 6), dt)
+    C = C.at[:3, :3].set(jnp.array([[-1.0, h, h], [h, -1.0, h], [h, h, -1.0]], dt))
+    C = C.at[3:, 3:].set(-k * jnp.eye(3, dtype=dt))
     mu, U = eigh_small(H @ C @ H)
     v1 = H @ U[:, -1]  # the single positive eigenvalue (C has inertia (1, 5))
     v1 = jnp.where(v1[0] + v1[1] + v1[2] < 0, -v1, v1)

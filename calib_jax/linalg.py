@@ -82,13 +82,11 @@ def eigh_small(a: jax.Array, sweeps: int = 12) -> tuple[jax.Array, jax.Array]:
     if n > _UNROLL_MAX:
         return jnp.linalg.eigh(a)
     pairs = [(p, q) for p in range(n - 1) for q in range(p + 1, n)]
-    ps = jnp.array([p for p, _ in pairs])
-    qs = jnp.array([q for _, q in pairs])
     eye = jnp.eye(n, dtype=a.dtype)
 
-    def rotate(k, carry):
-        A, V = carry
-        p, q = ps[k], qs[k]
+    def rotate(A, V, p, q):
+        # one Jacobi rotation on the static pair (p, q): only rows and columns p, q change,
+        # O(n) work instead of two n x n products
         apq = A[p, q]
         app, aqq = A[p, p], A[q, q]
         active = jnp.abs(apq) > 0
@@ -98,11 +96,19 @@ def eigh_small(a: jax.Array, sweeps: int = 12) -> tuple[jax.Array, jax.Array]:
         t = jnp.where(active, t, 0.0)
         c = 1.0 / jnp.sqrt(t * t + 1.0)
         s = t * c
-        G = eye.at[p, p].set(c).at[q, q].set(c).at[p, q].set(s).at[q, p].set(-s)
-        return G.T @ A @ G, V @ G
+        rp, rq = A[p, :], A[q, :]
+        A = A.at[p, :].set(c * rp - s * rq).at[q, :].set(s * rp + c * rq)
+        cp, cq = A[:, p], A[:, q]
+        A = A.at[:, p].set(c * cp - s * cq).at[:, q].set(s * cp + c * cq)
+        vp, vq = V[:, p], V[:, q]
+        V = V.at[:, p].set(c * vp - s * vq).at[:, q].set(s * vp + c * vq)
+        return A, V
 
     def sweep(_, carry):
-        return jax.lax.fori_loop(0, len(pairs), rotate, carry)
+        A, V = carry
+        for p, q in pairs:
+            A, V = rotate(A, V, p, q)
+        return A, V
 
     A, V = jax.lax.fori_loop(0, sweeps, sweep, (a, eye))
     w = jnp.diag(A)

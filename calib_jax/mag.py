@@ -33,7 +33,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .calibration import MagCalibration
-from .geometry import ellipsoid_fit_constrained, sphere_fit
+from .geometry import (
+    ellipsoid_fit_constrained_moments,
+    moments,
+    sphere_fit,
+    sphere_fit_moments,
+)
 from .io.files import SensorLog
 from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
 from .models.mag import (
@@ -69,12 +74,18 @@ RUNAWAY = 10.0
 def ellipsoid_start(x: jax.Array, w: jax.Array, model: str) -> jax.Array:
     """Start for the normalised fit: the constrained algebraic ellipsoid (full), or the
     algebraic sphere (sphere, diag; and full when the algebraic fit fails)."""
-    cs, r = sphere_fit(x, w)
-    p_sph = pack(cs, jnp.eye(3, dtype=x.dtype) / (r * r), model)
+    return ellipsoid_start_moments(moments(x, w), model)
+
+
+def ellipsoid_start_moments(S: jax.Array, model: str) -> jax.Array:
+    """:func:`ellipsoid_start` from the moment matrix of the (normalised) samples."""
+    cs, r = sphere_fit_moments(S)
+    eye = jnp.eye(3, dtype=S.dtype)
+    p_sph = pack(cs, eye / (r * r), model)
     if model != "full":
         return p_sph
-    c, M, ok = ellipsoid_fit_constrained(x, w)
-    p_ell = pack(c, jnp.where(ok, M, jnp.eye(3, dtype=x.dtype)), "full")
+    c, M, ok = ellipsoid_fit_constrained_moments(S)
+    p_ell = pack(c, jnp.where(ok, M, eye), "full")
     return jnp.where(ok & jnp.all(jnp.isfinite(p_ell)), p_ell, p_sph)
 
 

@@ -134,8 +134,10 @@ def _normalised(seed, noise=0.005):
     return (x - m) / s
 
 
-def test_vmap_equals_loop():
-    """Three sensors in one vmapped call give the per-sensor results (float64 round-off)."""
+def test_vmap_equals_loop(tol):
+    """Three sensors in one vmapped call give the per-sensor results, to the precision the
+    minimum is defined at (Tol.PARAM_REL: the batched and single compilations round
+    differently, and chi2 is flat to round-off within ~1e-8 of the optimum)."""
     xs = np.stack([_normalised(k) for k in range(3)])
     w = np.ones(N)
     fit = jax.jit(jax.vmap(lambda x, w: fit_ellipsoid_normalized(x, w, "full")))
@@ -143,7 +145,9 @@ def test_vmap_equals_loop():
     one = jax.jit(lambda x, w: fit_ellipsoid_normalized(x, w, "full"))
     for k in range(3):
         r = one(jnp.asarray(xs[k]), jnp.asarray(w))
-        np.testing.assert_allclose(np.asarray(batch.params[k]), np.asarray(r.params), rtol=1e-9)
+        np.testing.assert_allclose(
+            np.asarray(batch.params[k]), np.asarray(r.params), rtol=tol.PARAM_REL, atol=1e-9
+        )
         # both converged; which test fired first can differ by round-off between the batched
         # and the single compilation
         assert is_converged(int(batch.status[k])) and is_converged(int(r.status))

@@ -153,6 +153,7 @@ def lm_solve(
     max_nfev: int | None = None,
     history: bool = False,
     absolute_sigma: bool = False,
+    dof: jax.Array | float | None = None,
 ) -> LMResult:
     """Minimise chi2(p) = sum_i w_i e_i(p)^2 by Gavin's Levenberg-Marquardt.
 
@@ -182,6 +183,9 @@ def lm_solve(
         Keep per-iteration chi2, lambda and acceptance in fixed buffers of length max_iter.
     absolute_sigma : bool
         Weights are 1/sigma^2: do not scale the covariance by the reduced chi2.
+    dof : scalar, optional
+        Degrees of freedom for the reduced chi2 and the covariance; default the number of
+        non-zero weights minus n.
 
     Returns
     -------
@@ -208,8 +212,13 @@ def lm_solve(
         )
     w = jnp.ones(m, dtype) if weights is None else jnp.asarray(weights, dtype)
     max_nfev_ = 10**9 if max_nfev is None else int(max_nfev)
-    # Degrees of freedom count only samples with non-zero weight (padding is weight 0).
-    dof = jnp.maximum(jnp.sum(w > 0) - n, 1).astype(dtype)
+    # Degrees of freedom count only samples with non-zero weight (padding is weight 0); a
+    # caller whose residual vector is a compressed stand-in for the samples (the moment form
+    # in calib_jax.batch) passes the samples' dof instead.
+    if dof is None:
+        dof = jnp.maximum(jnp.sum(w > 0) - n, 1).astype(dtype)
+    else:
+        dof = jnp.maximum(jnp.asarray(dof, dtype), 1.0)
     n_fd = 2 * n if fd_scheme == "central" else n
 
     def jac_exact(p):

@@ -28,6 +28,7 @@ def optx_solve(
     atol: float = 1e-14,
     max_iter: int = 256,
     absolute_sigma: bool = False,
+    dof: jax.Array | float | None = None,
 ) -> LMResult:
     """Minimise sum_i w_i e_i(p)^2 with ``optimistix.LevenbergMarquardt``.
 
@@ -54,7 +55,10 @@ def optx_solve(
     chi2 = jnp.sum(w * e * e)
     J = jax.jacfwd(fun)(p, args)
     jtwj = (J * w[:, None]).T @ J
-    dof = jnp.maximum(jnp.sum(w > 0) - n, 1).astype(p.dtype)
+    if dof is None:
+        dof = jnp.maximum(jnp.sum(w > 0) - n, 1).astype(p.dtype)
+    else:
+        dof = jnp.maximum(jnp.asarray(dof, p.dtype), 1.0)
     reduced = chi2 / dof
     cov, stderr, corr, cond = uncertainty(jtwj, reduced, absolute_sigma)
     steps = sol.stats["num_steps"]

@@ -33,6 +33,10 @@ class Status(enum.IntEnum):
     above round-off (4 sqrt(m) eps chi2): the fit is at the optimum to machine precision, though the
     absolute tests 1-3 did not trigger (typical with many samples, where the gradient at the
     optimum is dominated by round-off)."""
+    INSUFFICIENT_DATA = 9
+    """Batch fits: too few valid samples for the model (checked inside jit; nothing fitted)."""
+    NO_COVERAGE = 10
+    """Batch fits: the valid samples lie in one plane of directions; nothing fitted."""
 
 
 CONVERGED_STATUSES = (
@@ -61,6 +65,12 @@ _MESSAGES = {
     Status.CONVERGED: "converged: the external solver met its tolerances",
     Status.FAILED: "not converged: the external solver reported a failure",
     Status.CONVERGED_ROUNDOFF: "converged: chi2 no longer changes beyond round-off",
+    Status.INSUFFICIENT_DATA: (
+        "not fitted: too few valid samples (finite and inside the mask) for the model"
+    ),
+    Status.NO_COVERAGE: (
+        "not fitted: the samples' directions lie in one plane; record more orientations"
+    ),
 }
 
 
