@@ -140,6 +140,24 @@ def _batch_moments(raw, valid, mean, k):
     return jax.lax.map(one, (raw, valid, mean, k))
 
 
+def _unit_sphere_moments(dtype) -> jax.Array:
+    """Moments of 26 directions on the unit sphere: a stand-in problem for sensors that fail
+    the checks, so their (discarded) fit converges at once instead of holding the vmapped
+    loop to its iteration budget."""
+    d = np.array(
+        [
+            (i, j, k)
+            for i in (-1, 0, 1)
+            for j in (-1, 0, 1)
+            for k in (-1, 0, 1)
+            if (i, j, k) != (0, 0, 0)
+        ],
+        float,
+    )
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return moments(jnp.asarray(d, dtype), jnp.ones(len(d), dtype))
+
+
 def _checks(S, n_params):
     """Status before fitting, from the moments alone: too few samples, or one plane."""
     n = S[9, 9]
@@ -177,6 +195,7 @@ def _accel_one(S, mean, k, g, model, solver, options):
     free = np.asarray(ACCEL_MODELS[model])
     idx = np.flatnonzero(free)
     pre = _checks(S, len(idx))
+    S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = jnp.where(jnp.asarray(free), initial_guess_moments(S), 0.0)
     n = S[9, 9]
 
@@ -195,6 +214,7 @@ def _accel_one(S, mean, k, g, model, solver, options):
 
 def _mag_one(S, mean, k, field, model, solver, options):
     pre = _checks(S, N_PARAMS[model])
+    S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = ellipsoid_start_moments(S, model)
     n = S[9, 9]
     res = _solve(lambda p: mag_theta(p, model), p0, S, n - N_PARAMS[model], solver, options)
@@ -242,6 +262,14 @@ def _compiled(kind: str, model: str, solver: str, options: tuple, shard: bool):
     return jax.jit(run)
 
 
+def sensor_bucket(n: int, devices: int = 1) -> int:
+    """Padded sensor count: a multiple of 8 (and of the device count). Every batch of a size
+    compiles once, and a sensor's lanes run the same instructions whatever else is in the
+    batch, so adding a bad sensor leaves the others bit for bit unchanged."""
+    step = int(np.lcm(8, devices))
+    return max(step, -(-n // step) * step)
+
+
 def _prepare(raw, mask, shard):
     raw = jnp.asarray(raw)
     if raw.ndim != 3 or raw.shape[-1] != 3:
@@ -258,16 +286,19 @@ def _prepare(raw, mask, shard):
         raise ValueError(f"mask must be (sensors, samples) = {raw.shape[:2]}, got {mask.shape}")
     valid = mask & jnp.all(jnp.isfinite(raw), axis=-1)
     raw = jnp.where(valid[..., None], raw, 0.0)  # NaN never enters the arithmetic
+    n = raw.shape[0]
+    size = sensor_bucket(n, len(jax.devices()) if shard else 1)
+    if size > n:  # padding sensors: all samples masked out (INSUFFICIENT_DATA, sliced off)
+        raw = jnp.concatenate([raw, jnp.zeros((size - n, *raw.shape[1:]), raw.dtype)])
+        valid = jnp.concatenate([valid, jnp.zeros((size - n, valid.shape[1]), bool)])
     if shard:
         raw, valid = shard_batch(raw), shard_batch(valid)
     return raw, valid
 
 
 def shard_batch(x: jax.Array) -> jax.Array:
-    """Place the leading (sensor) axis across all local devices (jax.sharding).
-
-    The sensor count must be a multiple of the device count (pad with masked-out sensors).
-    """
+    """Place the leading (sensor) axis across all local devices (jax.sharding); the count
+    must be a multiple of the device count (the batch functions pad to one)."""
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     devices = np.array(jax.devices())
@@ -316,9 +347,11 @@ def calibrate_accel_batch(
         raise ValueError(f"model must be one of {tuple(ACCEL_MODELS)}, got {model!r}")
     if solver not in ("lm1", "lm2", "lm3", "optimistix"):
         raise ValueError(f"solver must be lm1, lm2, lm3 or optimistix, got {solver!r}")
+    n = np.shape(raw)[0]
     raw, valid = _prepare(raw, mask, shard)
     opts = tuple(sorted((solver_options or {}).items()))
-    return _compiled("accel", model, solver, opts, shard)(raw, valid, jnp.asarray(g, raw.dtype))
+    out = _compiled("accel", model, solver, opts, shard)(raw, valid, jnp.asarray(g, raw.dtype))
+    return jax.tree.map(lambda a: a[:n], out)
 
 
 def calibrate_mag_batch(
@@ -344,7 +377,9 @@ def calibrate_mag_batch(
         raise ValueError(f"solver must be lm1, lm2, lm3 or optimistix, got {solver!r}")
     if field is not None and not (np.isfinite(field) and field > 0):
         raise ValueError(f"field must be a positive magnitude, got {field!r}")
+    n = np.shape(raw)[0]
     raw, valid = _prepare(raw, mask, shard)
     opts = tuple(sorted((solver_options or {}).items()))
     ref = jnp.asarray(np.nan if field is None else field, raw.dtype)
-    return _compiled("mag", model, solver, opts, shard)(raw, valid, ref)
+    out = _compiled("mag", model, solver, opts, shard)(raw, valid, ref)
+    return jax.tree.map(lambda a: a[:n], out)
