@@ -145,7 +145,7 @@ def stream(total: int, chunk: int, shard: bool) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--sizes", type=int, nargs="+", default=[1, 10, 100, 1000, 10000])
+    ap.add_argument("--sizes", type=int, nargs="*", default=[1, 10, 100, 1000, 10000])
     ap.add_argument("--peer-max", type=int, default=100)
     ap.add_argument("--stream", type=int, default=0, help="sensors to stream in chunks")
     ap.add_argument("--chunk", type=int, default=1000)
@@ -199,6 +199,8 @@ def main() -> None:
         )
         del raw, rj
     result = {"rows": rows, "devices": devices, "shard": args.shard}
+    if args.stream and rows:
+        print("note: peak RSS is per process; run --stream with --sizes (none) to measure it alone")
     if args.stream:
         result["stream"] = stream(args.stream, args.chunk, args.shard)
         print("stream:", result["stream"])
@@ -231,9 +233,12 @@ def main() -> None:
     print(md)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    tag = "_sharded" if args.shard else ""
+    tag = ("_sharded" if args.shard else "") + ("" if rows else "_stream")
     (out / f"batch{tag}.json").write_text(json.dumps(result, indent=2))
     (out / f"batch{tag}.md").write_text(md)
+    if not rows:
+        print(f"wrote {out / f'batch{tag}.json'} and .md")
+        return
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(6, 4))

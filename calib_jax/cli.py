@@ -76,6 +76,60 @@ def run_mag(args: argparse.Namespace) -> int:
     return 0 if cal.success else 1
 
 
+def run_batch(args: argparse.Namespace) -> int:
+    _enable_x64()
+    import json
+
+    from .fleet import calibrate_files, calibrate_files_dask
+
+    root = Path(args.dir)
+    if not root.is_dir():
+        raise ValueError(f"{root} is not a directory")
+    paths = sorted(str(p) for p in root.rglob(args.pattern) if p.is_file())
+    if not paths:
+        raise ValueError(f"no files matching {args.pattern!r} under {root}; set --pattern")
+    options = {}
+    if args.sensor == "accel":
+        options.update(g=args.g, model=args.model or "accel9")
+    else:
+        options.update(field=args.field, model=args.model or "full")
+    print(f"calib-jax batch: {len(paths)} files under {root}, sensor {args.sensor}")
+    if args.dask is not None:
+        results = calibrate_files_dask(
+            paths,
+            scheduler=args.dask or None,
+            n_workers=args.workers,
+            sensor=args.sensor,
+            chunk=args.chunk,
+            columns=args.columns,
+            **options,
+        )
+    else:
+        results = calibrate_files(
+            paths, sensor=args.sensor, chunk=args.chunk, columns=args.columns, **options
+        )
+    out = open(args.json, "w") if args.json else None  # noqa: SIM115
+    n_ok = n_all = 0
+    try:
+        if out:
+            head = json.dumps({"format_version": 1, "sensor": args.sensor})[:-1]
+            out.write(head + ', "results": [\n')
+        for r in results:
+            # written as they arrive: a crash keeps what was calibrated so far
+            if out:
+                out.write(("" if n_all == 0 else ",\n") + json.dumps(r))
+                out.flush()
+            n_all += 1
+            n_ok += r["status"] == "ok"
+        if out:
+            out.write("\n]}\n")
+    finally:
+        if out:
+            out.close()
+    print(f"{n_ok} of {n_all} calibrated" + (f"; wrote {args.json}" if args.json else ""))
+    return 0 if n_ok == n_all else 1
+
+
 def _plot(cal, path: str | None) -> None:
     if path:
         from .plots import plot_accel
@@ -179,6 +233,28 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--json", default=None, help="write the calibration JSON here")
     m.add_argument("--plot", default=None, help="write a PNG figure here")
     m.set_defaults(func=run_mag)
+
+    b = sub.add_parser(
+        "batch", help="calibrate every log under a directory, in chunks (or on a Dask cluster)"
+    )
+    b.add_argument("dir")
+    b.add_argument("--pattern", default="*.csv", help="file glob, searched recursively")
+    b.add_argument("--sensor", default="accel", choices=["accel", "mag"])
+    b.add_argument("--model", default=None, help="accel9|accel6 or sphere|diag|full")
+    b.add_argument("--g", type=float, default=1.0, help="accelerometer reference magnitude")
+    b.add_argument("--field", type=float, default=None, help="magnetometer field magnitude")
+    b.add_argument("--columns", default=None, help="column mapping for every file")
+    b.add_argument("--chunk", type=int, default=256, help="files per batch fit")
+    b.add_argument(
+        "--dask",
+        nargs="?",
+        const="",
+        default=None,
+        help="spread chunks over Dask: a scheduler address, or none for a local cluster",
+    )
+    b.add_argument("--workers", type=int, default=2, help="local Dask workers")
+    b.add_argument("--json", default=None, help="write all results here (streamed)")
+    b.set_defaults(func=run_batch)
 
     d = sub.add_parser(
         "demo", help="calibrate the accelerometer and magnetometer logs shipped with the package"
