@@ -39,7 +39,7 @@ from .geometry import (
     sqrtm_inv_spd,
 )
 from .io.files import SensorLog
-from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
+from .lm import LMResult, fit_status, lm_solve, optx_solve, status_message
 from .models.accel import PARAM_NAMES, normalized_sphere_residual
 from .padding import pad_rows
 from .static import StaticReport, detect_static, distinct_directions
@@ -420,14 +420,7 @@ def calibrate_accel(
     solver_status = int(res.status)
 
     # status
-    if solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED) or not np.all(
-        np.isfinite(params)
-    ):
-        status = "failed"
-    elif not is_converged(solver_status):
-        status = "not_converged"
-    else:
-        status = "ok"
+    status = fit_status(solver_status, bool(np.all(np.isfinite(params))))
     free = np.asarray(MODELS[model])
     poor = [
         PARAM_NAMES[i]

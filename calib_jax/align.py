@@ -95,6 +95,11 @@ class PlaneAlignment:
     warnings: list[str] = field(default_factory=list)
 
 
+def _align_from_normal(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    eps = np.asarray(alignment_angles(jnp.asarray(n)))
+    return eps, np.asarray(alignment_matrix(jnp.asarray(eps)))
+
+
 def plane_alignment(
     v: np.ndarray,
     *,
@@ -134,8 +139,7 @@ def plane_alignment(
         n = centroid / np.linalg.norm(centroid)
         n = n if n[2] >= 0 else -n
         coef = np.array([-n[0] / n[2], -n[1] / n[2], 0.0])
-        eps = np.asarray(alignment_angles(jnp.asarray(n)))
-        A = np.asarray(alignment_matrix(jnp.asarray(eps)))
+        eps, A = _align_from_normal(n)
         return PlaneAlignment(
             matrix=A,
             eps_x_deg=float(np.degrees(eps[0])),
@@ -164,8 +168,7 @@ def plane_alignment(
     d = v - centroid
     ang = np.degrees(np.arctan2(d @ e2, d @ e1)) % 360.0
     turn = 10.0 * len(np.unique((ang // 10).astype(int)))
-    eps = np.asarray(alignment_angles(jnp.asarray(n)))
-    A = np.asarray(alignment_matrix(jnp.asarray(eps)))
+    eps, A = _align_from_normal(n)
     problems = []
     if oop > max_out_of_plane:
         problems.append(

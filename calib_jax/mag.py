@@ -40,7 +40,7 @@ from .geometry import (
     sphere_fit_moments,
 )
 from .io.files import SensorLog
-from .lm import LMResult, Status, is_converged, lm_solve, optx_solve, status_message
+from .lm import LMResult, fit_status, is_converged, lm_solve, optx_solve, status_message
 from .models.mag import (
     MAG_MODELS,
     N_PARAMS,
@@ -317,16 +317,7 @@ def calibrate_mag(
             f"of {s:.4g}): the data cover too little of the sphere "
             "for this model; use model='sphere' or record more orientations"
         )
-    if (
-        solver_status in (Status.NONFINITE, Status.SINGULAR, Status.FAILED)
-        or not np.all(np.isfinite(W))
-        or runaway
-    ):
-        status = "failed"
-    elif not is_converged(solver_status):
-        status = "not_converged"
-    else:
-        status = "ok"
+    status = fit_status(solver_status, bool(np.all(np.isfinite(W))) and not runaway)
     names = PARAM_NAMES[chosen]
     poor = [nm for nm, e in zip(names, se_n, strict=True) if not np.isfinite(e) or e > POOR_STDERR]
     if status == "ok" and poor:

@@ -3,7 +3,7 @@
 from .gavin import DEFAULTS, GAVIN_DEFAULTS, LMDefaults, finite_difference_jacobian, lm_solve
 from .optx import optx_solve
 from .result import LMHistory, LMResult, uncertainty
-from .status import Status, is_converged, status_message
+from .status import Status, fit_status, is_converged, status_message
 
 __all__ = [
     "DEFAULTS",
@@ -13,6 +13,7 @@ __all__ = [
     "LMResult",
     "Status",
     "finite_difference_jacobian",
+    "fit_status",
     "is_converged",
     "lm_solve",
     "optx_solve",

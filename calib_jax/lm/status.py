@@ -82,3 +82,13 @@ def status_message(status: int) -> str:
 def is_converged(status: int) -> bool:
     """True for the statuses that mean the solver found a minimum."""
     return Status(int(status)) in CONVERGED_STATUSES
+
+
+def fit_status(status: int, usable: bool = True) -> str:
+    """The calibration records' status word for a solver status: "failed" (nothing usable:
+    non-finite, singular, an external failure, or ``usable`` False), "not_converged" (the
+    budget ran out) or "ok"; callers refine "ok" to "poorly_determined"."""
+    bad = (Status.NONFINITE, Status.SINGULAR, Status.FAILED, Status.INSUFFICIENT_DATA)
+    if int(status) in bad or int(status) == Status.NO_COVERAGE or not usable:
+        return "failed"
+    return "ok" if is_converged(status) else "not_converged"
