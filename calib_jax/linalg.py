@@ -71,11 +71,11 @@ def cho_solve_small(a: jax.Array, b: jax.Array) -> jax.Array:
     return jnp.stack(x)
 
 
-def eigh_small(a: jax.Array, sweeps: int = 12) -> tuple[jax.Array, jax.Array]:
+def eigh_small(a: jax.Array, sweeps: int = 8) -> tuple[jax.Array, jax.Array]:
     """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations.
 
     Returns (eigenvalues ascending, eigenvectors as columns), like ``jnp.linalg.eigh``, in
-    plain jnp operations (see the module docstring for why). Quadratic convergence: 12 sweeps
+    plain jnp operations (see the module docstring for why). Quadratic convergence: 8 sweeps
     are ample for n <= 16 in float64.
     """
     n = a.shape[0]
