@@ -10,13 +10,9 @@ so it must not read or write relative paths other than its own figures.
 
 from __future__ import annotations
 
-import tempfile
-import time
 from pathlib import Path
 
-import nbformat
-from nbclient import NotebookClient
-from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+from _nbbuild import run
 
 OUT = Path(__file__).resolve().parent / "04_lm_variants.ipynb"
 
@@ -460,31 +456,5 @@ minutes here, most of it compilation: 13 JAX variants x 5 problem shapes).
 )
 
 
-def build() -> nbformat.NotebookNode:
-    nb = new_notebook()
-    nb.metadata["kernelspec"] = {
-        "display_name": "Python 3",
-        "language": "python",
-        "name": "python3",
-    }
-    nb.metadata["language_info"] = {"name": "python"}
-    for kind, text in cells:
-        nb.cells.append(new_markdown_cell(text) if kind == "markdown" else new_code_cell(text))
-    return nb
-
-
-def main() -> None:
-    nb = build()
-    t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
-        NotebookClient(
-            nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": tmp}}
-        ).execute()
-    print(f"executed in {time.perf_counter() - t0:.1f} s")
-    nbformat.validate(nb)
-    nbformat.write(nb, OUT)
-    print(f"wrote {OUT}")
-
-
 if __name__ == "__main__":
-    main()
+    run(cells, OUT)
