@@ -807,6 +807,11 @@ def plot(result: dict, path: Path) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
+def _run_row(v, inst, r: dict) -> dict:
+    """One result row: the variant and instance labels, then the run's numbers."""
+    return dict(variant=v.name, group=inst.group, problem=inst.problem, instance=inst.label, **r)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=5, help="instances per simulated problem")
@@ -840,31 +845,14 @@ def main() -> None:
             compiled, c = compile_solver(v, shape, insts[0], args.budget)
             compile_s += c
             for inst in insts:
-                r = run_jax(v, compiled, inst, args.repeats)
-                runs.append(
-                    dict(
-                        variant=v.name,
-                        group=inst.group,
-                        problem=inst.problem,
-                        instance=inst.label,
-                        **r,
-                    )
-                )
+                runs.append(_run_row(v, inst, run_jax(v, compiled, inst, args.repeats)))
             print(f"  {shape.name:<12} {v.name:<20} compile {c:5.2f} s", flush=True)
     for v in VARIANTS:
         if v.kind != "scipy":
             continue
         for inst in instances:
             r = run_scipy(v, inst, args.repeats, args.scipy_tol, args.budget)
-            runs.append(
-                dict(
-                    variant=v.name,
-                    group=inst.group,
-                    problem=inst.problem,
-                    instance=inst.label,
-                    **r,
-                )
-            )
+            runs.append(_run_row(v, inst, r))
         print(f"  scipy {v.method} done", flush=True)
 
     wall = time.perf_counter() - t_start

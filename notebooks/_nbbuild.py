@@ -11,6 +11,18 @@ from nbclient import NotebookClient
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
 
+def recorder(cells: list[tuple[str, str]]):
+    """(md, code): functions that append a markdown or code cell to ``cells``."""
+
+    def md(text: str) -> None:
+        cells.append(("markdown", text.strip("\n")))
+
+    def code(text: str) -> None:
+        cells.append(("code", text.strip("\n")))
+
+    return md, code
+
+
 def build(cells: list[tuple[str, str]]) -> nbformat.NotebookNode:
     nb = new_notebook()
     nb.metadata["kernelspec"] = {

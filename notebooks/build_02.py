@@ -9,19 +9,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from _nbbuild import run
+from _nbbuild import recorder, run
 
 OUT = Path(__file__).resolve().parent / "02_magnetometer_marg.ipynb"
 
 cells: list[tuple[str, str]] = []
-
-
-def md(text: str) -> None:
-    cells.append(("markdown", text.strip("\n")))
-
-
-def code(text: str) -> None:
-    cells.append(("code", text.strip("\n")))
+md, code = recorder(cells)
 
 
 # ---------------------------------------------------------------------------------------------
