@@ -22,9 +22,28 @@ def monomials(x: jax.Array) -> jax.Array:
 
 
 def moments(x: jax.Array, w: jax.Array) -> jax.Array:
-    """S = sum_i w_i phi(x_i) phi(x_i)' (10 x 10) for samples x (N, 3), weights w (N,)."""
-    P = monomials(x)
-    return (P * w[:, None]).T @ P
+    """S = sum_i w_i phi(x_i) phi(x_i)' (10 x 10) for samples x (N, 3), weights w (N,).
+
+    S holds only 35 distinct power sums (degree <= 4), so it is assembled from the 6 x 10
+    product A = sum_i w_i q_i [q_i, x_i, 1]' with q = [x^2, y^2, z^2, xy, xz, yz]: 60 products
+    per sample instead of the 100 of phi phi' (0.22 -> 0.18 ms per 4,800-sample sensor here).
+    """
+    X, Y, Z = x[..., 0], x[..., 1], x[..., 2]
+    Q = jnp.stack([X * X, Y * Y, Z * Z, X * Y, X * Z, Y * Z], -1)
+    R = jnp.concatenate([Q, x, jnp.ones_like(X)[:, None]], -1)
+    A = (Q * w[:, None]).T @ R  # (6, 10)
+    s1 = jnp.concatenate([w @ x, jnp.sum(w)[None]])  # sums of w [x, y, z, 1]
+    q1 = A[:, 9]  # sums of w q
+    xx = q1[jnp.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])]  # sums of w x x'
+    bottom = jnp.concatenate(
+        [
+            jnp.concatenate([A[:, 6:9].T, xx, s1[:3, None]], axis=1),
+            jnp.concatenate([q1, s1])[None, :],
+        ],
+        axis=0,
+    )
+    d = jnp.array([1, 1, 1, 2, 2, 2, 1, 1, 1, 1], x.dtype)  # phi = d * [q, x, 1]
+    return jnp.concatenate([A, bottom], axis=0) * d[:, None] * d[None, :]
 
 
 def sphere_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -119,7 +138,7 @@ def ellipsoid_fit_constrained_moments(
     T = jnp.asarray(_LG, Sphi.dtype)
     S = T.T @ Sphi @ T
     S11, S12, S22 = S[:6, :6], S[:6, 6:], S[6:, 6:]
-    S22inv_S21 = jnp.stack([cho_solve_small(S22, S12.T[:, j]) for j in range(6)], axis=1)
+    S22inv_S21 = cho_solve_small(S22, S12.T)
     Mr = S11 - S12 @ S22inv_S21
     Mr = 0.5 * (Mr + Mr.T)
     d, V = eigh_small(Mr)
