@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from calib_jax.linalg import cho_solve_small, eigh_small, inv3
+from calib_jax.linalg import cho_solve_small, cholesky_small, eigh_small, inv3
 
 
 def hard_symmetric(n, count=90, seed=0):
@@ -53,3 +53,48 @@ def test_cho_solve_and_inv3_match_numpy():
     np.testing.assert_allclose(np.asarray(inv3(jnp.asarray(M))), np.linalg.inv(M), rtol=1e-12)
     # not positive definite: NaN, never an exception
     assert np.all(np.isnan(np.asarray(cho_solve_small(-jnp.asarray(A), jnp.asarray(b)))))
+
+
+def test_cholesky_small_and_matrix_right_hand_sides():
+    """The column-loop Cholesky against numpy (to 1e-12 relative on a well-conditioned SPD
+    matrix), several right-hand sides at once, and the semi-definite mode on a singular one."""
+    rng = np.random.default_rng(2)
+    B = rng.normal(size=(10, 10))
+    A = B @ B.T + 10 * np.eye(10)
+    L = np.asarray(jax.jit(cholesky_small)(jnp.asarray(A)))
+    np.testing.assert_allclose(L, np.linalg.cholesky(A), rtol=1e-12, atol=1e-12)
+    R = rng.normal(size=(10, 4))
+    np.testing.assert_allclose(
+        np.asarray(cho_solve_small(jnp.asarray(A), jnp.asarray(R))),
+        np.linalg.solve(A, R),
+        rtol=1e-11,
+    )
+    # rank 3 of 4: one zero column instead of NaN, and L L' still reproduces the matrix
+    C = rng.normal(size=(4, 3))
+    S = C @ C.T
+    Ls = np.asarray(cholesky_small(jnp.asarray(S), semidefinite=True))
+    assert np.all(np.isfinite(Ls))
+    np.testing.assert_allclose(Ls @ Ls.T, S, atol=1e-7 * np.abs(S).max())
+    assert np.all(np.isnan(np.asarray(cholesky_small(jnp.asarray(S - np.eye(4))))[-1]))
+
+
+@pytest.mark.parametrize("n", [3, 9])
+def test_uncertainty_cholesky_equals_eigh(n):
+    """The batch fit's Cholesky covariance against the eigen-decomposition one: equal to
+    1e-8 relative where J'WJ is well enough conditioned (condition < 1e6 here: both lose
+    about cond * eps), and all standard errors inf where it is singular."""
+    from calib_jax.lm import uncertainty, uncertainty_cholesky
+
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        J = rng.normal(size=(40, n)) * 10 ** rng.uniform(-3, 3, n)
+        JtJ = jnp.asarray(J.T @ J)
+        ref = jax.jit(uncertainty, static_argnums=2)(JtJ, 2.0, False)
+        got = jax.jit(uncertainty_cholesky, static_argnums=2)(JtJ, 2.0, False)
+        for a, b in zip(ref[:3], got[:3], strict=True):
+            np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-8, atol=1e-12)
+        assert np.isnan(float(got[3]))
+    J[:, 1] = 2.0 * J[:, 0]  # one parameter is a copy of another
+    cov, se, corr, _ = uncertainty_cholesky(jnp.asarray(J.T @ J), 2.0, False)
+    assert np.all(np.isinf(np.asarray(se)))
+    assert np.all(np.isnan(np.asarray(cov)))

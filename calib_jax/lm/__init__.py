@@ -2,7 +2,7 @@
 
 from .gavin import DEFAULTS, GAVIN_DEFAULTS, LMDefaults, finite_difference_jacobian, lm_solve
 from .optx import optx_solve
-from .result import LMHistory, LMResult, uncertainty
+from .result import LMHistory, LMResult, uncertainty, uncertainty_cholesky
 from .status import Status, fit_status, is_converged, status_message
 
 __all__ = [
@@ -19,4 +19,5 @@ __all__ = [
     "optx_solve",
     "status_message",
     "uncertainty",
+    "uncertainty_cholesky",
 ]

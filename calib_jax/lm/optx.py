@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .result import LMResult, uncertainty
+from .result import LMResult, uncertainty, uncertainty_cholesky
 from .status import Status
 
 
@@ -29,11 +29,13 @@ def optx_solve(
     max_iter: int = 256,
     absolute_sigma: bool = False,
     dof: jax.Array | float | None = None,
+    covariance_method: str = "eigh",
 ) -> LMResult:
     """Minimise sum_i w_i e_i(p)^2 with ``optimistix.LevenbergMarquardt``.
 
     Jittable and vmappable (``throw=False``: the per-member outcome is in ``status``).
     ``nfev`` and ``njev`` are optimistix's step count (it does not report evaluations).
+    ``covariance_method`` as :func:`calib_jax.lm.lm_solve`.
     """
     p0 = jnp.asarray(p0)
     e0 = fun(p0, args)
@@ -60,7 +62,8 @@ def optx_solve(
     else:
         dof = jnp.maximum(jnp.asarray(dof, p.dtype), 1.0)
     reduced = chi2 / dof
-    cov, stderr, corr, cond = uncertainty(jtwj, reduced, absolute_sigma)
+    unc = uncertainty if covariance_method == "eigh" else uncertainty_cholesky
+    cov, stderr, corr, cond = unc(jtwj, reduced, absolute_sigma)
     steps = sol.stats["num_steps"]
     status = jnp.where(
         sol.result == optx.RESULTS.successful,

@@ -7,10 +7,11 @@ and tests compare them field by field.
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from ..linalg import eigh_small
+from ..linalg import cholesky_small, eigh_small
 from .status import is_converged, status_message
 
 
@@ -95,3 +96,42 @@ def uncertainty(
     cov = jnp.where(undetermined[:, None] | undetermined[None, :], jnp.nan, cov)
     cov = jnp.where(jnp.eye(n, dtype=bool) & undetermined[:, None], jnp.inf, cov)
     return cov, stderr, corr, condition
+
+
+def uncertainty_cholesky(
+    jtwj: Float[Array, "n n"], reduced_chi2: Float[Array, ""], absolute_sigma: bool
+) -> tuple[Float[Array, "n n"], Float[Array, " n"], Float[Array, "n n"], Float[Array, ""]]:
+    """:func:`uncertainty` by a Cholesky factorisation instead of an eigen-decomposition.
+
+    About 10x cheaper under vmap (n column steps instead of 8 Jacobi sweeps of n(n-1)/2
+    rotations, which cost 0.1 ms per sensor in the batch fit, most of its LM time), and equal
+    to it where J'WJ is non-singular. It cannot say WHICH parameters a singular J'WJ leaves
+    undetermined: when a pivot of the Jacobi-scaled matrix falls below n^2 eps (the scale of
+    :func:`uncertainty`'s eigenvalue test, the largest eigenvalue being at most n), every
+    standard error is inf and the covariance NaN. ``condition`` is NaN (not computed).
+    """
+    n = jtwj.shape[0]
+    d = jnp.sqrt(jnp.diag(jtwj))
+    d_safe = jnp.where(d > 0, d, 1.0)
+    scaled = jtwj / jnp.outer(d_safe, d_safe)
+    L = cholesky_small(0.5 * (scaled + scaled.T), semidefinite=True)
+    piv = jnp.diag(L) ** 2
+    singular = jnp.any(piv <= n * n * jnp.finfo(jtwj.dtype).eps) | jnp.any(d == 0)
+    L = jnp.where(singular, jnp.eye(n, dtype=jtwj.dtype), L)
+    idx = jnp.arange(n)
+
+    def forward(i, Y):  # L Y = I, Y = L^-1 (lower triangular)
+        row = (jnp.where(idx == i, 1.0, 0.0) - jnp.sum(L[i][:, None] * Y, axis=0)) / L[i, i]
+        return Y.at[i].set(row)
+
+    Linv = jax.lax.fori_loop(0, n, forward, jnp.zeros_like(L))
+    cov_scaled = jnp.sum(Linv[:, :, None] * Linv[:, None, :], axis=0)  # L^-T L^-1
+    scale = 1.0 if absolute_sigma else reduced_chi2
+    cov = cov_scaled / jnp.outer(d_safe, d_safe) * scale
+    sd = jnp.sqrt(jnp.diag(cov_scaled))
+    corr = cov_scaled / jnp.outer(sd, sd)
+    nan = jnp.full_like(cov, jnp.nan)
+    cov = jnp.where(singular, nan, cov)
+    corr = jnp.where(singular, nan, corr)
+    stderr = jnp.where(singular, jnp.inf, jnp.sqrt(jnp.diag(cov)))
+    return cov, stderr, corr, jnp.asarray(jnp.nan, jtwj.dtype)
