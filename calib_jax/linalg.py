@@ -14,7 +14,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-_UNROLL_MAX = 16
+_LOOP_MAX = 32  # Cholesky: column loops, compile time independent of n
+_JACOBI_MAX = 16  # Jacobi eigh: 8 sweeps are ample up to here
 
 
 def inv3(a: jax.Array) -> jax.Array:
@@ -67,12 +68,12 @@ def cholesky_small(a: jax.Array, jitter: float = 0.0, semidefinite: bool = False
 def cho_solve_small(a: jax.Array, b: jax.Array) -> jax.Array:
     """Solve a x = b for a symmetric positive-definite n x n matrix by Cholesky.
 
-    b is (n,) or (n, k). Loops over rows (see :func:`cholesky_small`) for n <= 16; larger
+    b is (n,) or (n, k). Loops over rows (see :func:`cholesky_small`) for n <= 32; larger
     systems use jax.scipy's LAPACK Cholesky. Returns NaN when a is not positive definite (the
     caller treats that as a failed step).
     """
     n = a.shape[0]
-    if n > _UNROLL_MAX:
+    if n > _LOOP_MAX:
         return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a), b)
     L = cholesky_small(a)
     vector = b.ndim == 1
@@ -99,7 +100,7 @@ def eigh_small(a: jax.Array, sweeps: int = 8) -> tuple[jax.Array, jax.Array]:
     are ample for n <= 16 in float64.
     """
     n = a.shape[0]
-    if n > _UNROLL_MAX:
+    if n > _JACOBI_MAX:
         return jnp.linalg.eigh(a)
     pairs = [(p, q) for p in range(n - 1) for q in range(p + 1, n)]
     ps = jnp.array([p for p, _ in pairs])

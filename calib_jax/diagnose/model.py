@@ -1,0 +1,137 @@
+"""The base model with every catalogue effect, as one pure residual (jit, vmap, grad).
+
+One observation is a point x (a static-interval mean, or a magnetometer sample), normalised
+as x_n = (x - c0) / k0 so that the base calibration is close to alpha = I, b = 0, with its
+drivers: tau (time, scaled to [-1/2, 1/2] over the log) and T (temperature, scaled the same
+way; 0 without a temperature column). The calibrated vector and the residual are
+
+    b(tau, T) = b + d1 tau + d2 tau^2 + c1 T + c2 T^2              bias / hard iron
+    y         = alpha^-1 (x_n - b(tau, T)) / (1 + k1 T)             paper 1 eq. 1, gains(T)
+    y_j      <- y_j - q_j y_j^2 - r_j y_j^3                          per-axis nonlinearity
+    e         = |y| - 1                                             relative magnitude error
+
+with alpha symmetric (gains on the diagonal, paper 1's non-orthogonality off it). All 30
+parameters live in one vector ``theta`` (layout in :data:`SLOTS`); which ones a fit frees is a
+boolean mask ``free``. A parameter that is not free is multiplied out of the model and pinned
+to 0 by one extra residual row, so every candidate model is the SAME compiled function: the
+diagnosis fits the base model, each candidate, split halves and null simulations in one
+vmapped call. The magnetometer's sphere model ties gains 2 and 3 to gain 1 and the cross
+terms to 0 unless the ``soft_iron`` slots are free.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..linalg import inv3
+from ..lm import lm_solve
+
+N_THETA = 30
+
+SLOTS: dict[str, slice] = {
+    "gains": slice(0, 3),
+    "cross": slice(3, 6),
+    "bias": slice(6, 9),
+    "drift1": slice(9, 12),
+    "drift2": slice(12, 15),
+    "temp_bias1": slice(15, 18),
+    "temp_bias2": slice(18, 21),
+    "temp_scale1": slice(21, 24),
+    "quadratic": slice(24, 27),
+    "cubic": slice(27, 30),
+}
+
+
+def mask(*slots: str, base: str = "full") -> np.ndarray:
+    """Free-parameter mask: the base model ("full": alpha and b; "sphere": one gain and b)
+    plus the named slots (``"soft_iron"`` frees gains 2-3 and the cross terms)."""
+    free = np.zeros(N_THETA, bool)
+    if base == "full":
+        free[0:9] = True
+    elif base == "sphere":
+        free[[0, 6, 7, 8]] = True
+    else:
+        raise ValueError(f"base must be 'full' or 'sphere', got {base!r}")
+    for s in slots:
+        if s == "soft_iron":
+            free[[1, 2, 3, 4, 5]] = True
+        else:
+            free[SLOTS[s]] = True
+    return free
+
+
+def calibrated(theta, free, x, tau, temp):
+    """The calibrated vector y (3,) of one observation (see the module docstring)."""
+    th = jnp.where(free, theta, 0.0)
+    g = jnp.where(free[0:3], theta[0:3], theta[0])  # sphere: gains 2, 3 follow gain 1
+    s = th[3:6]
+    alpha = jnp.stack(
+        [
+            jnp.stack([g[0], s[0], s[1]]),
+            jnp.stack([s[0], g[1], s[2]]),
+            jnp.stack([s[1], s[2], g[2]]),
+        ]
+    )
+    b = th[6:9] + th[9:12] * tau + th[12:15] * tau**2 + th[15:18] * temp + th[18:21] * temp**2
+    y = inv3(alpha) @ (x - b) / (1.0 + th[21:24] * temp)
+    return y - th[24:27] * y**2 - th[27:30] * y**3
+
+
+def residual(theta, data):
+    """Data rows |y_i| - 1 (weighted by sqrt(w) outside), then 30 pinning rows."""
+    x, tau, temp, w, free = data
+    y = jax.vmap(calibrated, in_axes=(None, None, 0, 0, 0))(theta, free, x, tau, temp)
+    e = jnp.sqrt(jnp.sum(y * y, axis=1)) - 1.0
+    pin = jnp.where(free, 0.0, theta)
+    return jnp.concatenate([e, pin])
+
+
+def _fit_one(theta0, x, tau, temp, w, free, max_iter):
+    m = x.shape[0]
+    weights = jnp.concatenate([w, jnp.ones(N_THETA, w.dtype)])
+    dof = jnp.sum(w > 0) - jnp.sum(free)
+    data = (x, tau, temp, w, free)
+    res = lm_solve(
+        residual,
+        theta0,
+        data,
+        weights=weights,
+        update_type=1,
+        dof=dof,
+        max_iter=max_iter,
+        covariance_method="cholesky",
+    )
+    e = residual(res.params, data)[:m]
+    J = jax.jacfwd(residual)(res.params, data)[:m]
+    return res.params, res.stderr, res.status, e, J
+
+
+@functools.lru_cache(maxsize=4)
+def _compiled_fit(max_iter: int):
+    return jax.jit(jax.vmap(lambda *a: _fit_one(*a, max_iter)))
+
+
+def fit_many(theta0, x, tau, temp, w, free, max_iter: int = 100):
+    """Fit a stack of problems (leading axis) in one vmapped call.
+
+    Returns numpy arrays: params (P, 30), stderr (P, 30), status (P,), residuals e (P, m) of
+    the data rows, and the data rows' Jacobian J (P, m, 30) at the solution.
+    """
+    out = _compiled_fit(int(max_iter))(*(jnp.asarray(a) for a in (theta0, x, tau, temp, w, free)))
+    return tuple(np.asarray(o) for o in out)
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_calibrated():
+    return jax.jit(jax.vmap(calibrated, in_axes=(None, None, 0, 0, 0)))
+
+
+def calibrated_many(theta, free, x, tau, temp) -> np.ndarray:
+    """:func:`calibrated` for every observation (host arrays in, numpy out)."""
+    return np.asarray(
+        _compiled_calibrated()(*(jnp.asarray(a) for a in (theta, free, x, tau, temp)))
+    )
