@@ -1,4 +1,5 @@
-"""Command line: ``calib-jax accel FILE``, ``calib-jax mag FILE`` and ``calib-jax demo``."""
+"""Command line: ``calib-jax accel FILE``, ``calib-jax mag FILE``, ``calib-jax record`` and
+``calib-jax demo``."""
 
 from __future__ import annotations
 
@@ -183,6 +184,13 @@ def run_demo(args: argparse.Namespace) -> int:
     return 0 if cal.success and mcal.success else 1
 
 
+def run_record(args: argparse.Namespace) -> int:
+    _enable_x64()
+    from .record import run
+
+    return run(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="calib-jax", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -262,6 +270,53 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="calib_jax_demo", help="folder for the JSON and the figure")
     d.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
     d.set_defaults(func=run_demo)
+
+    r = sub.add_parser(
+        "record",
+        help="record from serial ports with live coverage feedback, then calibrate",
+        description="Record line records from one or more serial ports (any pyserial URL) "
+        "into append-only CSV logs, showing the static poses and sphere coverage found so far; "
+        "stop at --seconds, when coverage is enough, when the devices go away, or on Ctrl-C; "
+        "then calibrate (one port: the full report; several: one batch fit) and write the "
+        "JSON beside each log.",
+    )
+    r.add_argument(
+        "--port",
+        action="append",
+        required=True,
+        help="device path or pyserial URL (/dev/ttyACM0, socket://host:port); repeat for more",
+    )
+    r.add_argument("--baud", type=int, default=115200)
+    r.add_argument(
+        "--columns",
+        default=None,
+        help="field order, e.g. t,ax,ay,az,mx,my,mz ('_' skips); default: the device's header",
+    )
+    r.add_argument(
+        "--scale", default=None, help="raw to units: one number, or a=0.000061,m=0.15,t=0.001"
+    )
+    r.add_argument(
+        "--delimiter", default="auto", choices=["auto", "comma", "tab", "semicolon", "space"]
+    )
+    r.add_argument("--out", required=True, help="log file (several ports: FILE.devK.csv)")
+    r.add_argument("--sensor", default="accel", choices=["accel", "mag", "marg"])
+    r.add_argument("--seconds", type=float, default=None, help="stop after this long")
+    r.add_argument("--resume", action="store_true", help="append to an existing log")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing log")
+    r.add_argument("--no-auto-stop", action="store_true", help="keep going once covered")
+    r.add_argument("--target-poses", type=int, default=48, help="distinct poses (paper 1: 48)")
+    r.add_argument(
+        "--max-reconnect",
+        type=float,
+        default=30.0,
+        help="seconds to keep reconnecting an unplugged device before it counts as gone",
+    )
+    r.add_argument("--g", type=float, default=None, help="accelerometer reference magnitude")
+    r.add_argument("--field", type=float, default=None, help="known field magnitude (mag)")
+    r.add_argument("--window", type=int, default=None, help="moving-variance window (samples)")
+    r.add_argument("--min-static", type=float, default=None, help="shortest pose (s)")
+    r.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
+    r.set_defaults(func=run_record)
     return p
 
 

@@ -1,0 +1,704 @@
+"""Guided recording: live coverage feedback while a board is turned, then its calibration.
+
+One reader thread per port (:class:`calib_jax.io.serial.SerialReader`), each with its own
+append-only log. The main thread, once a ``progress_interval``, runs the static detector on
+each device's accumulated accelerometer data and reports what paper 1's protocol still lacks:
+
+* poses: distinct static directions (10 degrees apart, :func:`calib_jax.static.distinct_directions`)
+  against paper 1's 48-pose target;
+* faces: whether some pose has had each of +x, -x, +y, -y, +z, -z pointing up (within 45
+  degrees; the accelerometer reads the upward specific force);
+* octants of the sphere of directions no pose has visited yet;
+* for a magnetometer, the share of the sphere of field directions covered
+  (:func:`calib_jax.mag.sphere_coverage`, 100 equal-area cells) and the faces not yet seen.
+
+The session stops at ``seconds``, when every device's coverage is enough (``auto_stop``), when
+every device has gone away for longer than ``max_reconnect_seconds``, or on Ctrl-C; the logs
+are flushed and synced in every case. Then each log is read back with
+:func:`calib_jax.io.load_log` (the file is what gets calibrated, whatever happened in memory)
+and calibrated: one device with :func:`calib_jax.calibrate_accel` /
+:func:`calib_jax.calibrate_mag` (and for ``marg`` both, plus the magnetometer-to-accelerometer
+rotation), several devices with one vmapped batch fit
+(:func:`calib_jax.batch.calibrate_accel_batch` / :func:`calib_jax.batch.calibrate_mag_batch`).
+Results are written as JSON beside each log (``FILE`` -> ``FILE.calib.json``, or
+``FILE.accel.calib.json`` and ``FILE.mag.calib.json`` for ``marg``).
+
+Host side only: threads, files and printing; the fits are the package's jitted cores.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .io.serial import Batch, SerialReader
+from .static import detect_static, distinct_directions
+
+PAPER1_POSES = 48
+"""Paper 1's protocol: 48 static orientations."""
+MAG_TARGET = 0.7
+"""Share of the sphere of field directions a magnetometer session should cover (calibrate_mag
+warns below 0.5)."""
+FACE_COS = np.cos(np.deg2rad(45.0))
+SENSORS = ("accel", "mag", "marg")
+_FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+# ---------------------------------------------------------------------------------------------
+# coverage
+
+
+def _sphere_centre(points: np.ndarray) -> np.ndarray:
+    """Algebraic sphere-fit centre of ``points`` (n, 3), or the origin when they do not pin
+    one down (too few, or all on one side)."""
+    if len(points) < 6:
+        return np.zeros(3)
+    A = np.column_stack([2.0 * points, np.ones(len(points))])
+    b = np.sum(points * points, axis=1)
+    sol, _, rank, sv = np.linalg.lstsq(A, b, rcond=None)
+    c = sol[:3]
+    r2 = sol[3] + c @ c
+    if rank < 4 or sv[-1] < 1e-6 * sv[0] or not r2 > 0 or np.linalg.norm(c) > np.sqrt(r2):
+        return np.zeros(3)
+    return c
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return v[n[:, 0] > 0] / n[n[:, 0] > 0]
+
+
+def _faces_missing(dirs: np.ndarray) -> list[str]:
+    axes = np.vstack([np.eye(3), -np.eye(3)])[[0, 3, 1, 4, 2, 5]]
+    if len(dirs) == 0:
+        return list(_FACES)
+    return [f for f, a in zip(_FACES, axes, strict=True) if not np.any(dirs @ a >= FACE_COS)]
+
+
+def _octants_missing(dirs: np.ndarray) -> list[str]:
+    seen = {tuple(bool(v) for v in d >= 0) for d in dirs}
+    out = []
+    for signs in itertools.product((True, False), repeat=3):
+        if signs not in seen:
+            out.append("".join(("+" if s else "-") + a for s, a in zip(signs, "xyz", strict=True)))
+    return out
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """What one device's recording covers so far."""
+
+    sensor: str
+    samples: int
+    static_intervals: int = 0
+    poses: int = 0
+    """Distinct static directions, 10 degrees apart."""
+    target_poses: int = PAPER1_POSES
+    faces_missing: list[str] = field(default_factory=lambda: list(_FACES))
+    """Axes no static pose has had pointing up yet (accelerometer)."""
+    octants_missing: list[str] = field(default_factory=list)
+    mag_fraction: float | None = None
+    """Share of the sphere of field directions covered (magnetometer)."""
+    mag_target: float = MAG_TARGET
+    mag_faces_missing: list[str] = field(default_factory=list)
+
+    @property
+    def uses_accel(self) -> bool:
+        return self.sensor in ("accel", "marg")
+
+    @property
+    def uses_mag(self) -> bool:
+        return self.sensor in ("mag", "marg")
+
+    @property
+    def enough(self) -> bool:
+        ok = True
+        if self.uses_accel:
+            ok &= (
+                self.poses >= self.target_poses
+                and not self.faces_missing
+                and not self.octants_missing
+            )
+        if self.uses_mag:
+            ok &= (self.mag_fraction or 0.0) >= self.mag_target and not self.mag_faces_missing
+        return bool(ok)
+
+    def missing(self) -> str:
+        """What is still missing, in words ('' when enough)."""
+        parts = []
+        if self.uses_accel:
+            if self.faces_missing:
+                parts.append("no pose with " + ", ".join(self.faces_missing) + " up yet")
+            if self.octants_missing:
+                parts.append("octants not visited: " + " ".join(self.octants_missing))
+            if self.poses < self.target_poses:
+                parts.append(f"{self.target_poses - self.poses} more poses")
+        if self.uses_mag:
+            if self.mag_faces_missing:
+                parts.append("field never along " + ", ".join(self.mag_faces_missing))
+            if (self.mag_fraction or 0.0) < self.mag_target:
+                parts.append("tumble through more orientations")
+        return "; ".join(parts)
+
+    def line(self) -> str:
+        """One progress line."""
+        out = [f"{self.samples} samples"]
+        if self.uses_accel:
+            out.append(f"{self.static_intervals} static, {self.poses}/{self.target_poses} poses")
+        if self.uses_mag and self.mag_fraction is not None:
+            out.append(
+                f"mag {100 * self.mag_fraction:.0f} % of the sphere "
+                f"(target {100 * self.mag_target:.0f} %)"
+            )
+        miss = self.missing()
+        return ", ".join(out) + (f"; missing: {miss}" if miss else "; coverage enough")
+
+
+def assess_coverage(
+    acc: np.ndarray | None,
+    mag: np.ndarray | None,
+    *,
+    sensor: str = "accel",
+    sample_rate: float | None = None,
+    window: int | None = None,
+    min_duration: float | None = None,
+    target_poses: int = PAPER1_POSES,
+    mag_target: float = MAG_TARGET,
+) -> Coverage:
+    """The coverage of a recording so far (see the module docstring)."""
+    if sensor not in SENSORS:
+        raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
+    n = max(len(acc) if acc is not None else 0, len(mag) if mag is not None else 0)
+    kw: dict = {"sensor": sensor, "samples": n, "target_poses": target_poses}
+    kw["mag_target"] = mag_target
+    if sensor in ("accel", "marg") and acc is not None and len(acc) >= 8:
+        x = np.asarray(acc, float)
+        ok = np.all(np.isfinite(x), axis=1)
+        rep = detect_static(
+            x,
+            sample_rate=sample_rate,
+            window=window,
+            min_duration=min_duration if sample_rate else None,
+            valid=ok,
+        )
+        means = rep.means()
+        centre = _sphere_centre(means)
+        dirs = _unit(means - centre)
+        kw.update(
+            static_intervals=rep.n_intervals,
+            poses=distinct_directions(means, centre) if len(means) else 0,
+            faces_missing=_faces_missing(dirs),
+            octants_missing=_octants_missing(dirs),
+        )
+    elif sensor in ("accel", "marg"):
+        kw.update(octants_missing=_octants_missing(np.zeros((0, 3))))
+    if sensor in ("mag", "marg") and mag is not None and len(mag) >= 8:
+        from .mag import sphere_coverage
+
+        m = np.asarray(mag, float)
+        m = m[np.all(np.isfinite(m), axis=1)]
+        m = m[:: max(1, len(m) // 5000)]  # a few thousand directions say as much
+        dirs = _unit(m - _sphere_centre(m))
+        frac = sphere_coverage(dirs)[0] if len(dirs) else 0.0
+        kw.update(mag_fraction=float(frac), mag_faces_missing=_faces_missing(dirs))
+    elif sensor in ("mag", "marg"):
+        kw.update(mag_fraction=0.0, mag_faces_missing=list(_FACES))
+    return Coverage(**kw)
+
+
+def _rate(t: np.ndarray) -> float | None:
+    dt = np.diff(t[-4000:])
+    dt = dt[dt > 0]
+    return float(1.0 / np.median(dt)) if dt.size else None
+
+
+# ---------------------------------------------------------------------------------------------
+# the session
+
+
+def device_paths(out: str | Path, n: int) -> list[Path]:
+    """The log of each device: ``out`` itself for one, ``STEM.devK.SUFFIX`` for several."""
+    out = Path(out)
+    if n == 1:
+        return [out]
+    suffix = out.suffix or ".csv"
+    return [out.with_name(f"{out.stem}.dev{k}{suffix}") for k in range(n)]
+
+
+def calibration_paths(log: str | Path, sensor: str) -> dict[str, Path]:
+    """Where the JSON of each calibrated sensor goes, beside the log."""
+    log = Path(log)
+    if sensor == "marg":
+        return {
+            "accel": log.with_suffix(".accel.calib.json"),
+            "mag": log.with_suffix(".mag.calib.json"),
+            "align": log.with_suffix(".align.json"),
+        }
+    return {sensor: log.with_suffix(".calib.json")}
+
+
+@dataclass
+class Device:
+    """One port of a session: its reader, what it has read, and its coverage."""
+
+    url: str
+    path: Path
+    reader: SerialReader
+    batches: list[Batch] = field(default_factory=list)
+    coverage: Coverage | None = None
+    error: str | None = None
+    thread: threading.Thread | None = None
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def data(self) -> Batch:
+        with self.lock:
+            merged = Batch.concat(self.batches)
+            self.batches = [merged] if len(merged) else []
+        return merged
+
+    @property
+    def done(self) -> bool:
+        return self.thread is not None and not self.thread.is_alive()
+
+
+@dataclass
+class Session:
+    """A finished recording: the devices and why it stopped."""
+
+    devices: list[Device]
+    sensor: str
+    reason: str
+    """'seconds', 'covered', 'devices_gone' or 'interrupted'."""
+    seconds: float
+
+
+def _run_reader(dev: Device, stop: threading.Event) -> None:
+    try:
+        with dev.reader as r:
+            for batch in r:
+                if len(batch):
+                    with dev.lock:
+                        dev.batches.append(batch)
+                if stop.is_set():
+                    break
+    except Exception as exc:  # noqa: BLE001 - reported by the main thread, never swallowed
+        dev.error = f"{type(exc).__name__}: {exc}"
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def record_session(
+    ports: Sequence[str],
+    out: str | Path,
+    *,
+    sensor: str = "accel",
+    seconds: float | None = None,
+    auto_stop: bool = True,
+    target_poses: int = PAPER1_POSES,
+    mag_target: float = MAG_TARGET,
+    window: int | None = None,
+    min_static: float | None = None,
+    progress_interval: float = 1.0,
+    echo: Callable[[str], None] | None = _stderr,
+    **reader_options,
+) -> Session:
+    """Record from every port at once until time, coverage, devices gone, or Ctrl-C.
+
+    ``reader_options`` go to each :class:`SerialReader` (``baudrate``, ``columns``,
+    ``scale``, ``resume``, ``overwrite``, ``max_reconnect_seconds`` ...). Errors a reader
+    would raise at the start (an existing log without ``resume``) are raised here, before
+    any port is opened.
+    """
+    if sensor not in SENSORS:
+        raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
+    ports = list(ports)
+    if not ports:
+        raise ValueError("give at least one port (--port URL)")
+    if len(set(ports)) != len(ports):
+        raise ValueError(f"a port is given twice: {ports}")
+    say = echo or (lambda s: None)
+    paths = device_paths(out, len(ports))
+    devices = []
+    for k, (url, path) in enumerate(zip(ports, paths, strict=True)):
+        tag = f"[{k}] " if len(ports) > 1 else ""
+        reader = SerialReader(
+            url, log=path, on_message=lambda s, tag=tag: say(tag + s), **reader_options
+        )
+        devices.append(Device(url=url, path=path, reader=reader))
+    stop = threading.Event()
+    for dev in devices:
+        dev.thread = threading.Thread(
+            target=_run_reader, args=(dev, stop), name=f"serial {dev.url}", daemon=True
+        )
+    say(
+        f"recording {sensor} from {', '.join(ports)} into {', '.join(map(str, paths))}; "
+        "Ctrl-C stops and calibrates"
+    )
+    t0 = time.monotonic()
+    reason = "devices_gone"
+    try:
+        for dev in devices:
+            dev.thread.start()
+        next_report = t0 + progress_interval
+        while True:
+            stop.wait(min(0.1, progress_interval))
+            now = time.monotonic()
+            if seconds is not None and now - t0 >= seconds:
+                reason = "seconds"
+                break
+            if all(dev.done for dev in devices):
+                reason = "devices_gone"
+                break
+            if now >= next_report:
+                next_report = now + progress_interval
+                _assess(devices, sensor, window, min_static, target_poses, mag_target)
+                say(_progress(devices, now - t0))
+                if auto_stop and all(d.coverage is not None and d.coverage.enough for d in devices):
+                    reason = "covered"
+                    break
+    except KeyboardInterrupt:
+        reason = "interrupted"
+    finally:
+        stop.set()
+        for dev in devices:
+            if dev.thread.is_alive():
+                dev.thread.join(timeout=10.0)
+            if dev.thread.is_alive():  # stuck in a driver call: close from here
+                dev.reader.close()
+    _assess(devices, sensor, window, min_static, target_poses, mag_target)
+    elapsed = time.monotonic() - t0
+    say(_progress(devices, elapsed))
+    words = {
+        "seconds": "time is up",
+        "covered": "coverage is enough",
+        "devices_gone": "every device has gone",
+        "interrupted": "interrupted (Ctrl-C)",
+    }
+    say(f"stopped after {elapsed:.1f} s: {words[reason]}")
+    for k, dev in enumerate(devices):
+        tag = f"[{k}] " if len(devices) > 1 else ""
+        say(f"{tag}{dev.url}: {dev.reader.stats.summary()}; log {dev.path}")
+        if dev.error:
+            say(f"{tag}{dev.url}: reader stopped on an error: {dev.error}")
+    return Session(devices=devices, sensor=sensor, reason=reason, seconds=elapsed)
+
+
+def _assess(devices, sensor, window, min_static, target_poses, mag_target) -> None:
+    for dev in devices:
+        b = dev.data()
+        dev.coverage = assess_coverage(
+            b.acc,
+            b.mag,
+            sensor=sensor,
+            sample_rate=_rate(b.t) if len(b) > 1 else None,
+            window=window,
+            min_duration=min_static,
+            target_poses=target_poses,
+            mag_target=mag_target,
+        )
+
+
+def _progress(devices: list[Device], elapsed: float) -> str:
+    parts = []
+    for k, dev in enumerate(devices):
+        tag = f"[{k}] " if len(devices) > 1 else ""
+        state = "" if dev.reader.status == "connected" else f" ({dev.reader.status})"
+        parts.append(f"{tag}{dev.coverage.line()}{state}")
+    sep = "\n  " if len(parts) > 1 else ""
+    return f"{elapsed:6.1f} s  " + sep + sep.join(parts)
+
+
+# ---------------------------------------------------------------------------------------------
+# calibration of what was recorded
+
+
+def calibrate_recording(
+    path: str | Path,
+    sensor: str,
+    *,
+    g: float | None = None,
+    field: float | None = None,
+    window: int | None = None,
+    min_static: float | None = None,
+    sensor_id: str | None = None,
+    solver: str = "lm1",
+    echo: Callable[[str], None] | None = print,
+) -> dict[str, object]:
+    """Calibrate one recorded log and write the JSON beside it; returns {name: result}.
+
+    ``accel``: :class:`calib_jax.AccelCalibration`; ``mag``: :class:`calib_jax.MagCalibration`;
+    ``marg``: both and, when the data allow it, the magnetometer-to-accelerometer rotation
+    (:func:`calib_jax.align_mag_to_accel`, written as ``.align.json``).
+    """
+    from .accel import calibrate_accel
+    from .io.files import load_log
+    from .mag import calibrate_mag
+
+    say = echo or (lambda s: None)
+    log = load_log(path)
+    out = calibration_paths(path, sensor)
+    results: dict[str, object] = {}
+    if sensor in ("accel", "marg"):
+        cal = calibrate_accel(
+            log,
+            g=g,
+            window=window,
+            min_duration=min_static if log.sample_rate else None,
+            sensor_id=sensor_id,
+            solver=solver,
+        )
+        cal.save(out["accel"])
+        say(f"accelerometer, {path}:\n{cal.report()}\nwrote {out['accel']}")
+        results["accel"] = cal
+    if sensor in ("mag", "marg"):
+        mcal = calibrate_mag(log, field=field, sensor_id=sensor_id, solver=solver)
+        mcal.save(out["mag"])
+        say(f"magnetometer, {path}:\n{mcal.report()}\nwrote {out['mag']}")
+        results["mag"] = mcal
+    if sensor == "marg":
+        from .align import align_mag_to_accel
+
+        try:
+            al = align_mag_to_accel(results["accel"].apply(log.acc), results["mag"].apply(log.mag))
+        except ValueError as exc:
+            say(f"no accel-mag rotation: {exc}")
+        else:
+            d = {
+                "format_version": 1,
+                "R_acc_from_mag": al.R_acc_from_mag.tolist(),
+                "axes": al.permutation_text,
+                "rotation_deg": al.rotation_deg,
+                "dip_deg": al.dip_deg,
+                "dip_stderr_deg": al.dip_stderr_deg,
+                "status": al.status,
+                "message": al.message,
+                "n_used": al.n_used,
+                "source": str(path),
+            }
+            Path(out["align"]).write_text(json.dumps(d, indent=2))
+            say(
+                f"accel-mag rotation: axes {al.permutation_text}, {al.rotation_deg:.2f} deg, "
+                f"dip {al.dip_deg:.2f} deg ({al.message}); wrote {out['align']}"
+            )
+            results["align"] = al
+    return results
+
+
+def _static_mask(log, window, min_static) -> np.ndarray:
+    x = np.asarray(log.acc, float)
+    ok = np.all(np.isfinite(x), axis=1)
+    rep = detect_static(
+        x,
+        sample_rate=log.sample_rate,
+        window=window,
+        min_duration=min_static if log.sample_rate else None,
+        valid=ok,
+    )
+    return rep.mask & ok
+
+
+def calibrate_devices(
+    paths: Sequence[str | Path],
+    sensor: str,
+    *,
+    g: float | None = None,
+    field: float | None = None,
+    window: int | None = None,
+    min_static: float | None = None,
+    sensor_ids: Sequence[str] | None = None,
+    solver: str = "lm1",
+    echo: Callable[[str], None] | None = print,
+) -> list[dict]:
+    """Several recorded logs in one vmapped batch fit per sensor; JSON beside each log.
+
+    Accelerometer: paper 1's fit on the static samples (the detector run per log);
+    magnetometer: the full ellipsoid on every finite sample. ``g`` defaults to 1 (output in
+    g), or 9.80665 when the static readings have norm 3-30 (m/s^2). Returns one dict per
+    device (also what is written): ``{"accel": {...}, "mag": {...}}``.
+    """
+    from .batch import calibrate_accel_batch, calibrate_mag_batch
+    from .io.files import load_log
+    from .lm import is_converged, status_message
+    from .padding import bucket
+
+    say = echo or (lambda s: None)
+    logs = [load_log(p) for p in paths]
+    ids = list(sensor_ids) if sensor_ids is not None else [str(p) for p in paths]
+    results: list[dict] = [
+        {"format_version": 1, "kind": "batch", "sensor_id": i, "source": str(p)}
+        for i, p in zip(ids, paths, strict=True)
+    ]
+    kinds = {"accel": ["accel"], "mag": ["mag"], "marg": ["accel", "mag"]}[sensor]
+    for kind in kinds:
+        xs, masks = [], []
+        for lg, p in zip(logs, paths, strict=True):
+            x = lg.acc if kind == "accel" else lg.mag
+            if x is None:
+                cols = "ax, ay, az" if kind == "accel" else "mx, my, mz"
+                raise ValueError(f"{p}: no {kind} columns ({cols}); record with --columns")
+            x = np.asarray(x, float)
+            ok = np.all(np.isfinite(x), axis=1)
+            xs.append(x)
+            masks.append(_static_mask(lg, window, min_static) if kind == "accel" else ok)
+        n = bucket(max(len(x) for x in xs))
+        raw = np.zeros((len(xs), n, 3))
+        mask = np.zeros((len(xs), n), bool)
+        for i, (x, m) in enumerate(zip(xs, masks, strict=True)):
+            raw[i, : len(x)] = np.where(np.isfinite(x), x, 0.0)
+            mask[i, : len(x)] = m
+        if kind == "accel":
+            ref = g
+            if ref is None:
+                norms = [
+                    np.median(np.linalg.norm(x[m], axis=1))
+                    for x, m in zip(xs, masks, strict=True)
+                    if m.any()
+                ]
+                ref = 9.80665 if norms and 3.0 < float(np.median(norms)) <= 30.0 else 1.0
+            r = calibrate_accel_batch(raw, mask, g=ref, solver=solver)
+        else:
+            r = calibrate_mag_batch(raw, mask, field=field, solver=solver)
+        params, stderr = np.asarray(r.params), np.asarray(r.stderr)
+        for i in range(len(xs)):
+            code = int(r.status[i])
+            p, s = params[i], stderr[i]
+            if kind == "accel":
+                block = {
+                    "params": {
+                        "gains": p[0:3].tolist(),
+                        "nonorth": p[3:6].tolist(),
+                        "bias": p[6:9].tolist(),
+                    },
+                    "stderr": {
+                        "gains": s[0:3].tolist(),
+                        "nonorth": s[3:6].tolist(),
+                        "bias": s[6:9].tolist(),
+                    },
+                    "g": ref,
+                    "static_samples": int(masks[i].sum()),
+                }
+            else:
+                block = {
+                    "center": p[0:3].tolist(),
+                    "soft_iron": p[3:12].reshape(3, 3).tolist(),
+                    "stderr_center": s[0:3].tolist(),
+                    "field": field,
+                }
+            block.update(
+                status="ok" if is_converged(code) else "failed",
+                solver_status=code,
+                message=status_message(code),
+                rms=float(r.rms[i]),
+                iterations=int(r.iterations[i]),
+                n_samples=int(r.n_samples[i]),
+            )
+            results[i][kind] = block
+    for i, (res, p) in enumerate(zip(results, paths, strict=True)):
+        target = Path(p).with_suffix(".calib.json")
+        target.write_text(json.dumps(res, indent=2))
+        say(f"[{i}] {res['sensor_id']}: " + _batch_line(res) + f"; wrote {target}")
+    return results
+
+
+def _batch_line(res: dict) -> str:
+    out = []
+    if "accel" in res:
+        a = res["accel"]
+        out.append(
+            f"accel {a['status']} gains {_fmt(a['params']['gains'])} bias "
+            f"{_fmt(a['params']['bias'])} rms {a['rms']:.2e}"
+        )
+    if "mag" in res:
+        m = res["mag"]
+        out.append(f"mag {m['status']} center {_fmt(m['center'])} rms {m['rms']:.2e}")
+    return "; ".join(out)
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{x:.5g}" for x in v) + "]"
+
+
+def session_ok(results: Sequence[dict | object]) -> bool:
+    """True when every calibration in ``results`` succeeded."""
+    ok = True
+    for r in results:
+        if isinstance(r, dict):
+            for kind in ("accel", "mag"):
+                item = r.get(kind)
+                if isinstance(item, dict):
+                    ok &= item.get("status") == "ok"
+                elif item is not None:
+                    ok &= bool(item.success)
+        else:
+            ok &= bool(r.success)
+    return bool(ok)
+
+
+def run(args) -> int:
+    """The ``calib-jax record`` command (arguments from :func:`calib_jax.cli.build_parser`)."""
+    session = record_session(
+        args.port,
+        args.out,
+        sensor=args.sensor,
+        seconds=args.seconds,
+        auto_stop=not args.no_auto_stop,
+        target_poses=args.target_poses,
+        window=args.window,
+        min_static=args.min_static,
+        baudrate=args.baud,
+        columns=args.columns,
+        scale=args.scale,
+        delimiter=args.delimiter,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        max_reconnect_seconds=args.max_reconnect,
+    )
+    paths = [d.path for d in session.devices if d.path.exists()]
+    if len(paths) < len(session.devices):
+        missing = [str(d.path) for d in session.devices if not d.path.exists()]
+        raise ValueError(
+            f"nothing was recorded into {', '.join(missing)} (no well-formed line arrived); "
+            "check --port, --baud and --columns"
+        )
+    try:
+        if len(session.devices) == 1:
+            dev = session.devices[0]
+            res = calibrate_recording(
+                dev.path,
+                args.sensor,
+                g=args.g,
+                field=args.field,
+                window=args.window,
+                min_static=args.min_static,
+                sensor_id=dev.url,
+                solver=args.solver,
+            )
+            ok = session_ok(list(res[k] for k in res if k in ("accel", "mag")))
+        else:
+            res = calibrate_devices(
+                paths,
+                args.sensor,
+                g=args.g,
+                field=args.field,
+                window=args.window,
+                min_static=args.min_static,
+                sensor_ids=[d.url for d in session.devices],
+                solver=args.solver,
+            )
+            ok = session_ok(res)
+    except ValueError as exc:
+        raise ValueError(
+            f"{exc}\nthe recording is kept in {', '.join(map(str, paths))}; add to it with "
+            "--resume, or calibrate it with calib-jax accel/mag FILE"
+        ) from None
+    return 0 if ok else 1
