@@ -317,6 +317,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--min-static", type=float, default=None, help="shortest pose (s)")
     r.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
     r.set_defaults(func=run_record)
+
+    from .diagnose.cli import add_parser as add_diagnose
+
+    add_diagnose(sub)
     return p
 
 

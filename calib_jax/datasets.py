@@ -50,3 +50,25 @@ def load_broad_excerpt() -> dict:
         "quat": np.column_stack([d["qw"], d["qx"], d["qy"], d["qz"]]),
         "movement": d["movement"].astype(bool),
     }
+
+
+def accel_tumble_log_path() -> Path:
+    """CK-Explorer accelerometer-only log (16,000 samples in g: 160 poses of exactly 100
+    samples; Apache-2.0). See ``data/ckexplorer_accmag/NOTES.md``. Columns ax, ay, az."""
+    return Path(str(resources.files("calib_jax") / "data" / "ckexplorer_accmag" / "acc_log.csv"))
+
+
+def qmc_log_path(which: str = "filtered") -> Path:
+    """QMC5883L free-rotation magnetometer logs in raw counts, 50 Hz, the first 60 s static
+    (MIT, Tomas Suarez 2025): ``which`` is "filtered" or "noisy". See
+    ``data/tomisuarez_qmc5883l_mag/NOTES.md``."""
+    if which not in ("filtered", "noisy"):
+        raise ValueError(f"which must be 'filtered' or 'noisy', got {which!r}")
+    return Path(
+        str(
+            resources.files("calib_jax")
+            / "data"
+            / "tomisuarez_qmc5883l_mag"
+            / f"{which}_raw_data.csv"
+        )
+    )

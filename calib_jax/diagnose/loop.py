@@ -363,15 +363,34 @@ def _jsonable(v):
 # --------------------------------------------------------------------------- the loop
 
 
-def _coefficients(effect, theta, se, scale) -> dict:
-    """An accepted effect's coefficients in output units (scale: normalised -> output)."""
+_MEANING = {
+    "drift1": "bias change over the whole log, per axis (x, y, z)",
+    "drift2": "quadratic bias term over the log (value at the ends minus the middle, x4)",
+    "temp_bias1": "bias change over the recorded temperature range, per axis",
+    "temp_bias2": "quadratic bias term over the temperature range",
+    "temp_scale1": "relative gain change over the recorded temperature range, per axis",
+    "quadratic": "q in a = y - q y^2 (y: linearly calibrated reading, a: corrected)",
+    "cubic": "r in y - r y^3",
+}
+
+
+def _coefficients(effect, theta, se) -> dict:
+    """An accepted effect's coefficients, relative to g or to the field, with their meaning."""
     out = {}
     for slot in _slots(effect, 2):
         if slot == "soft_iron":
             continue
         sl = M.SLOTS[slot]
         if np.any(theta[sl] != 0):
-            out[slot] = {"value": theta[sl] * scale, "stderr": se[sl] * scale}
+            out[slot] = {"value": theta[sl], "stderr": se[sl], "meaning": _MEANING[slot]}
+            if slot == "quadratic":
+                # the sensor reads y = a + q a^2 (to first order): |y| at +1 minus |y| at -1
+                # along an axis is 2 q
+                out["scale_asymmetry"] = {
+                    "value": theta[sl],
+                    "stderr": se[sl],
+                    "meaning": "(|reading at +1| - |reading at -1|) / 2 per axis",
+                }
     return out
 
 
@@ -436,43 +455,42 @@ def _run(
 
     for _ in range(MAX_ROUNDS):
         log: list[dict] = []
-        # --- outliers
-        act = w > 0
-        loo = cur["loo"]
-        med = np.median(loo[act])
-        sig = 1.4826 * np.median(np.abs(loo[act] - med))
-        z = stats.norm.isf(OUTLIER_FAMILYWISE / (2 * act.sum()))
-        bad = act & (np.abs(loo - med) > z * sig) & (np.abs(cur["e"]) > 3 * floor)
-        nbad = int(bad.sum())
-        if 0 < nbad <= max(1, int(0.1 * m)):
-            w2 = np.where(bad, 0.0, w)
-            P.add(cur["theta"], w2, free)
-            fit = P.run()[0]
-            rejected += [int(i) for i in np.flatnonzero(bad)]
-            w = w2
-            log.append(
-                {
-                    "effect": "outliers",
-                    "accepted": True,
-                    "rejected": [int(i) for i in np.flatnonzero(bad)],
-                    "robust_z": float(z),
-                }
-            )
-            cur = fit
-            st = _step("+".join(["base", *effects, "outliers"]), fit, len(rejected))
+        # --- outliers: reject the worst observation, refit, re-test, one at a time (a
+        # gross outlier distorts the fit and would otherwise drag good neighbours out with it)
+        newly: list[int] = []
+        limit = max(1, int(0.1 * m))
+        while True:
+            act = w > 0
+            loo = cur["loo"]
+            med = np.median(loo[act])
+            sig = 1.4826 * np.median(np.abs(loo[act] - med))
+            z = stats.norm.isf(OUTLIER_FAMILYWISE / (2 * act.sum()))
+            score = np.where(act, np.abs(loo - med) / max(sig, 1e-300), 0.0)
+            worst = int(np.argmax(score))
+            if score[worst] <= z or abs(cur["e"][worst]) <= 3 * floor:
+                break
+            if len(rejected) + len(newly) >= limit:
+                log.append(
+                    {
+                        "effect": "outliers",
+                        "accepted": False,
+                        "reason": f"more than {limit} observations (10 %) beyond the robust "
+                        "limit: that is structure, not outliers",
+                    }
+                )
+                break
+            w = np.where(np.arange(m) == worst, 0.0, w)
+            newly.append(worst)
+            P.add(cur["theta"], w, free)
+            cur = P.run()[0]
+        if newly:
+            rejected += newly
+            log.insert(0, {"effect": "outliers", "accepted": True, "rejected": newly})
+            st = _step("+".join(["base", *effects, "outliers"]), cur, len(rejected))
             st["added_effect"] = "outliers"
             steps.append(st)
             if "outliers" not in effects:
                 effects.append("outliers")
-        elif nbad > max(1, int(0.1 * m)):
-            log.append(
-                {
-                    "effect": "outliers",
-                    "accepted": False,
-                    "reason": f"{nbad} observations beyond the robust limit: too many to be "
-                    "outliers (more than 10 %); that is structure, not outliers",
-                }
-            )
 
         # --- parametric candidates: real, halves, null sims in one vmapped call
         # correlated residuals (a filtered magnetometer) make the formal standard errors too
@@ -484,12 +502,14 @@ def _run(
         idx: dict[str, dict] = {}
         for c in remaining:
             fc = M.mask(*_slots(c, degree), base=obs.base) | free
+            th0 = cur["theta"].copy()
+            th0[1:3] = np.where(free[1:3], th0[1:3], th0[0])  # freed gains start at the tie
             idx[c] = {
                 "free": fc,
-                "real": P.add(cur["theta"], w, fc),
-                "h1": P.add(cur["theta"], w * first, fc),
-                "h2": P.add(cur["theta"], w * ~first, fc),
-                "null": [P.add(cur["theta"], w, fc, x=xn) for xn in nulls],
+                "real": P.add(th0, w, fc),
+                "h1": P.add(th0, w * first, fc),
+                "h2": P.add(th0, w * ~first, fc),
+                "null": [P.add(th0, w, fc, x=xn) for xn in nulls],
             }
         null_base = [P.add(cur["theta"], w, free, x=xn) for xn in nulls]
         fits = P.run()
@@ -536,6 +556,8 @@ def _run(
                 best = (c, dbic, fit, d["free"])
         rounds.append(log)
         if best is None:
+            if newly:
+                continue  # re-test for outliers against the cleaned fit
             break
         c, _, fit, fc = best
         cur, free = fit, fc
@@ -566,18 +588,24 @@ def _structure(obs, e, w, theta, free, floor) -> list[dict]:
     y = _calibrated(theta, free, obs.x[act], tau, T)
     u = y / np.linalg.norm(y, axis=1, keepdims=True)
     drivers = {}
-    k = np.arange(1, 4)
-    drivers["time"] = np.column_stack(
-        [
-            tau,
-            tau**2,
-            tau**3,
-            np.sin(2 * np.pi * np.outer(tau, k)),
-            np.cos(2 * np.pi * np.outer(tau, k)),
-        ]
+    # time: a magnitude that follows time, and (bias-like) a vector effect that follows time,
+    # seen in the norm as u . b(t): products of the direction with the time basis
+    if m >= 150:
+        k = np.arange(1, 4)
+        f = [tau, tau**2, tau**3]
+    elif m >= 60:
+        k = np.arange(1, 4)
+        f = [tau]
+    else:
+        k = np.arange(1, 2)
+        f = [tau]
+    f = np.column_stack(
+        [*f, np.sin(2 * np.pi * np.outer(tau, k)), np.cos(2 * np.pi * np.outer(tau, k))]
     )
+    drivers["time"] = np.column_stack([f, *(u[:, [j]] * f for j in range(3))])
     if obs.temp is not None and np.ptp(obs.temp) > 0:
-        drivers["temperature"] = np.column_stack([T, T**2])
+        ft = np.column_stack([T, T**2])
+        drivers["temperature"] = np.column_stack([ft, *(u[:, [j]] * ft for j in range(3))])
     X, Y, Z = u.T
     orient = [X, Y, Z, X * Y, X * Z, Y * Z, X * X - Y * Y, Z * Z]
     if m >= 60:
@@ -676,7 +704,7 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     for st in res["steps"]:
         eff = st["added_effect"]
         if eff and eff not in ("outliers", "soft_iron"):
-            st["coefficients"] = _coefficients(eff, fin["theta"], fin["stderr"], 1.0)
+            st["coefficients"] = _coefficients(eff, fin["theta"], fin["stderr"])
     rejected = [
         {
             "index": i,
@@ -771,6 +799,7 @@ def diagnose_accel(
     temp: np.ndarray | None = None,
     sample_rate: float | None = None,
     block: int | None = None,
+    intervals: list[tuple[int, int]] | None = None,
     candidates: tuple[str, ...] = ACCEL_CANDIDATES,
     degree: int = 1,
     seed: int = 0,
@@ -787,6 +816,8 @@ def diagnose_accel(
     block : int, optional
         Observations are consecutive blocks of this many samples (logs recorded pose by pose
         with a fixed count, like CK-Explorer's 160 x 100) instead of detected static intervals.
+    intervals : list of (start, stop), optional
+        The static intervals, as sample ranges, instead of detecting them.
     candidates : tuple of str
         Catalogue effects to try (``outliers`` is always tested). Temperature effects are
         skipped without a temperature column.
@@ -807,7 +838,9 @@ def diagnose_accel(
         t = np.arange(n) / (sample_rate or 1.0)
     t = np.asarray(t, float)
     ok = np.all(np.isfinite(x), axis=1)
-    if block:
+    if intervals is not None:
+        spans = [(int(a), int(b)) for a, b in intervals if b - a > 1 and ok[a:b].all()]
+    elif block:
         spans = [(a, a + block) for a in range(0, n - block + 1, block)]
         spans = [(a, b) for a, b in spans if ok[a:b].all()]
     else:
@@ -863,7 +896,8 @@ def diagnose_accel(
         norms.append(_norm(res0, free0, xs, np.zeros(b - a), np.zeros(b - a)))
     white = white_floor(norms)
     L = int(np.median([b - a for a, b in spans]))
-    longest = max(range(m), key=lambda i: spans[i][1] - spans[i][0])
+    # the longest rest; among equally long ones (fixed blocks) the stillest
+    longest = max(range(m), key=lambda i: (spans[i][1] - spans[i][0], -motion[i]))
     a, b = spans[longest]
     rest = norms[longest]
     if b - a < 2 * L:
@@ -903,9 +937,9 @@ def diagnose_mag(
 
     Observations are samples (every k-th, at most ``max_points``); the error is
     (|m| - radius) / radius. ``model`` is the declared model: "full" (ellipsoid) or "sphere"
-    (hard iron only; ``soft_iron`` is then a candidate). Floors: the per-sample scatter of the
-    calibrated magnitude over the longest rest if the log has one (white), its Allan deviation
-    at the decimation length; without a rest, the first-difference noise.
+    (hard iron only; ``soft_iron`` is then a candidate). Floors, from the longest rest if the
+    log has one: the per-sample scatter of the calibrated magnitude about a quadratic trend
+    (white) and its Allan deviation at one sample; without a rest, the first-difference noise.
     """
     from ..mag import calibrate_mag
 
@@ -961,8 +995,11 @@ def diagnose_mag(
     if rep.intervals:
         iv = max(rep.intervals, key=lambda v: v.n)
         rest = nrm_all[iv.start : iv.stop]
-        white = float(np.std(rest, ddof=1))
-        allan = allan_deviation(rest, k) if k > 1 else white
+        # per-sample scatter about a quadratic trend (slow effects are what the loop looks
+        # for, not noise), and the Allan deviation at one sample (the observation length)
+        tr = np.arange(len(rest)) / len(rest)
+        white = float(np.std(rest - np.polyval(np.polyfit(tr, rest, 2), tr), ddof=3))
+        allan = allan_deviation(rest, 1)
         obs.notes.append(
             f"floors from the longest rest, samples {iv.start}-{iv.stop} ({iv.n} samples)"
         )

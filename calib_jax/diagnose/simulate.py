@@ -1,0 +1,157 @@
+"""Simulated logs with known effects, to check that the loop finds what is there (and only that).
+
+Accelerometer: ``poses`` static poses of ``hold`` samples at ``rate`` Hz (uniformly random
+gravity directions, the first pose ``first_hold`` samples long, like the rest imu_tk logs start
+with), joined by short moves, a random nine-parameter base calibration, white noise, and any
+of the effects below added in the same form :mod:`calib_jax.diagnose.model` fits them.
+Magnetometer: a slow random tumble of ``samples`` samples after a rest, on a random ellipsoid.
+
+Effects (all sizes in units of g or of the field):
+
+=====================  =========================================================
+``bias_drift``         bias + d tau, d = ``size`` * (1, -0.7, 0.5), tau in [-1/2, 1/2]
+``hard_iron_drift``    the same on the magnetometer centre
+``temperature_bias``   bias + c T, T a two-cycle temperature swing scaled to [-1/2, 1/2]
+``temperature_scale``  readings * (1 + k T), k = ``size`` * (1, -0.7, 0.5)
+``scale_nonlinearity`` y_j + q_j y_j^2 with q = ``size`` * (0.6, -1, 0.8)
+``outliers``           three poses disturbed by ``4 size`` along a random direction
+``soft_iron``          (magnetometer) a full ellipsoid, declared as a sphere
+``periodic_bias``      NOT in the catalogue: bias + ``size`` sin(2 pi 3 tau) on x
+=====================  =========================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+DIRS = np.array([1.0, -0.7, 0.5])
+
+
+@dataclass
+class SimulatedLog:
+    raw: np.ndarray  # (N, 3)
+    t: np.ndarray  # (N,) s
+    temp: np.ndarray  # (N,) degrees C
+    intervals: list[tuple[int, int]]  # the static poses [start, stop)
+    effects: tuple[str, ...]
+    size: float
+    noise: float
+    sample_rate: float
+    disturbed: tuple[int, ...] = ()  # poses moved by ``outliers``
+
+
+def _random_alpha(rng) -> tuple[np.ndarray, np.ndarray]:
+    A = np.diag(1 + 0.05 * rng.uniform(-1, 1, 3))
+    s = 0.02 * rng.uniform(-1, 1, 3)
+    A[0, 1] = A[1, 0] = s[0]
+    A[0, 2] = A[2, 0] = s[1]
+    A[1, 2] = A[2, 1] = s[2]
+    return A, 0.05 * rng.uniform(-1, 1, 3)
+
+
+def _drivers(t, rng):
+    tau = (t - t.min()) / np.ptp(t) - 0.5
+    temp = 30 + 10 * np.sin(2 * np.pi * 2 * (tau + 0.5) + rng.uniform(0, 2 * np.pi))
+    T = (temp - 0.5 * (temp.max() + temp.min())) / np.ptp(temp)
+    return tau, temp, T
+
+
+def _apply(effects, size, u, tau, T, alpha, b, rng, pose_of_sample):
+    """Readings x for true unit vectors u (N, 3) with the declared effects."""
+    y = u.copy()
+    if "scale_nonlinearity" in effects:
+        y = y + size * np.array([0.6, -1.0, 0.8]) * y**2
+    if "temperature_scale" in effects:
+        y = y * (1 + size * DIRS * T[:, None])
+    bias = np.broadcast_to(b, u.shape).copy()
+    if "bias_drift" in effects or "hard_iron_drift" in effects:
+        bias = bias + size * DIRS * tau[:, None]
+    if "temperature_bias" in effects:
+        bias = bias + size * DIRS * T[:, None]
+    if "periodic_bias" in effects:
+        bias[:, 0] += size * np.sin(2 * np.pi * 3 * tau)
+    x = y @ alpha.T + bias
+    disturbed = ()
+    if "outliers" in effects and pose_of_sample is not None:
+        n_poses = pose_of_sample.max() + 1
+        disturbed = tuple(int(p) for p in rng.choice(np.arange(1, n_poses), 3, replace=False))
+        for p in disturbed:
+            d = rng.normal(size=3)
+            x[pose_of_sample == p] += 4 * size * d / np.linalg.norm(d)
+    return x, disturbed
+
+
+def simulate_accel_log(
+    effects: tuple[str, ...] = (),
+    *,
+    size: float = 3e-3,
+    poses: int = 60,
+    hold: int = 100,
+    first_hold: int = 2000,
+    move: int = 30,
+    rate: float = 100.0,
+    noise: float = 2e-3,
+    seed: int = 0,
+) -> SimulatedLog:
+    rng = np.random.default_rng(seed)
+    alpha, b = _random_alpha(rng)
+    dirs = rng.normal(size=(poses, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    u, pose, intervals = [], [], []
+    n = 0
+    for k in range(poses):
+        h = first_hold if k == 0 else hold
+        intervals.append((n, n + h))
+        u.append(np.repeat(dirs[k][None], h, 0))
+        pose.append(np.full(h, k))
+        n += h
+        if k + 1 < poses:
+            s = np.linspace(0, 1, move + 2)[1:-1, None]
+            v = (1 - s) * dirs[k] + s * dirs[k + 1]
+            u.append(v / np.linalg.norm(v, axis=1, keepdims=True))
+            pose.append(np.full(move, -1))
+            n += move
+    u = np.concatenate(u)
+    pose = np.concatenate(pose)
+    t = np.arange(len(u)) / rate
+    tau, temp, T = _drivers(t, rng)
+    x, disturbed = _apply(effects, size, u, tau, T, alpha, b, rng, pose)
+    x = x + noise * rng.normal(size=x.shape)
+    return SimulatedLog(x, t, temp, intervals, tuple(effects), size, noise, rate, disturbed)
+
+
+def simulate_mag_log(
+    effects: tuple[str, ...] = (),
+    *,
+    size: float = 0.02,
+    samples: int = 6000,
+    rest: int = 1500,
+    rate: float = 50.0,
+    noise: float = 5e-3,
+    seed: int = 0,
+) -> SimulatedLog:
+    rng = np.random.default_rng(seed)
+    alpha, b = _random_alpha(rng)
+    if "soft_iron" in effects:
+        alpha = alpha + np.diag(size * np.array([3.0, -2.0, 1.0]))
+    # smooth random tumble: integrate a slowly varying rotation rate
+    n = samples
+    w = np.cumsum(rng.normal(size=(n, 3)), axis=0)
+    w = w - np.linspace(0, 1, n)[:, None] * w[-1]
+    w = 2.0 * w / np.abs(w).max()  # rad/s
+    w[:rest] = 0.0
+    v = np.empty((n, 3))
+    v[0] = rng.normal(size=3)
+    v[0] /= np.linalg.norm(v[0])
+    for i in range(1, n):
+        v[i] = v[i - 1] + np.cross(w[i], v[i - 1]) / rate
+        v[i] /= np.linalg.norm(v[i])
+    t = np.arange(n) / rate
+    tau, temp, T = _drivers(t, rng)
+    x, _ = _apply(
+        tuple(e for e in effects if e != "outliers"), size, v, tau, T, alpha, b, rng, None
+    )
+    x = x + noise * rng.normal(size=x.shape)
+    return SimulatedLog(x, t, temp, [(0, rest)], tuple(effects), size, noise, rate)

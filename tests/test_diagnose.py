@@ -1,0 +1,206 @@
+"""Close the loop (issue 6): simulated logs with known effects, clean logs, an effect outside the
+catalogue, too few poses, and what the loop finds on the real logs.
+
+Tolerances: "within 1.5x of the floor" is the issue's acceptance; coefficient recovery is
+checked within 5 standard errors (Tol.N_SIGMA). All simulated accelerometer logs have 60
+poses (one compile of the vmapped fit for every test), magnetometer logs 6,000 samples.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from calib_jax.cli import main
+from calib_jax.datasets import accel_tumble_log_path, demo_log_path, qmc_log_path
+from calib_jax.diagnose import allan_deviation, diagnose_accel, diagnose_mag
+from calib_jax.diagnose import model as M
+from calib_jax.diagnose.simulate import simulate_accel_log, simulate_mag_log
+from calib_jax.io.files import load_log
+
+from .conftest import Tol
+
+
+def run_accel(effects, seed=1, **kw):
+    s = simulate_accel_log(effects, seed=seed, **kw)
+    return s, diagnose_accel(s.raw, t=s.t, temp=s.temp, intervals=s.intervals)
+
+
+def run_mag(effects, seed=1, model="full"):
+    s = simulate_mag_log(effects, seed=seed)
+    return s, diagnose_mag(s.raw, t=s.t, temp=s.temp, sample_rate=s.sample_rate, model=model)
+
+
+def test_residual_jacobian_is_exact():
+    """jacfwd of the residual with every effect free against central differences (FD_ABS)."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(12, 3))
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    tau, T = rng.uniform(-0.5, 0.5, 12), rng.uniform(-0.5, 0.5, 12)
+    free = np.ones(M.N_THETA, bool)
+    theta = np.zeros(M.N_THETA)
+    theta[:3] = 1.0
+    theta[3:] = 0.01 * rng.normal(size=M.N_THETA - 3)
+    data = tuple(jnp.asarray(a) for a in (x, tau, T, np.ones(12), free))
+    J = np.asarray(jax.jacfwd(M.residual)(jnp.asarray(theta), data))
+    h = 1e-6
+    fd = np.stack(
+        [
+            (
+                np.asarray(M.residual(jnp.asarray(theta + h * e), data))
+                - np.asarray(M.residual(jnp.asarray(theta - h * e), data))
+            )
+            / (2 * h)
+            for e in np.eye(M.N_THETA)
+        ],
+        axis=1,
+    )
+    np.testing.assert_allclose(J, fd, atol=Tol.FD_ABS)
+
+
+def test_allan_deviation_of_white_noise():
+    """White noise: sigma_A(n) = sigma / sqrt(n). 200,000 samples estimate it to ~1 % at n = 10
+    (about 20,000 independent differences), so 5 % is a loose bound."""
+    y = np.random.default_rng(0).normal(size=200_000)
+    for n in (1, 10, 100):
+        assert allan_deviation(y, n) == pytest.approx(1 / np.sqrt(n), rel=0.05)
+    assert np.isnan(allan_deviation(y[:10], 6))
+
+
+@pytest.mark.parametrize(
+    "effect",
+    ["bias_drift", "temperature_bias", "temperature_scale", "scale_nonlinearity", "outliers"],
+)
+def test_accel_effect_is_found_and_brings_the_residual_to_the_floor(effect):
+    s, d = run_accel((effect,))
+    assert d.effects == [effect], d.rounds
+    assert d.rms_before > 2 * d.noise_floor  # the effect was visible
+    assert d.rms_after <= 1.5 * d.noise_floor, d.summary()
+    assert not d.unexplained_structure
+    assert [st["added_effect"] for st in d.steps] == [None, effect]
+    if effect == "scale_nonlinearity":
+        # q recovered: the simulator reads y = a + size * (0.6, -1, 0.8) a^2; the model corrects
+        # a = y - q y^2 in normalised units (gains ~ 1 +- 5 %), so q ~ size * (0.6, -1, 0.8)
+        q = np.asarray(d.steps[-1]["coefficients"]["quadratic"]["value"])
+        se = np.asarray(d.steps[-1]["coefficients"]["quadratic"]["stderr"])
+        truth = s.size * np.array([0.6, -1.0, 0.8])
+        assert np.all(np.abs(q - truth) < Tol.N_SIGMA * se + 0.05 * np.abs(truth)), (q, truth)
+    if effect == "outliers":
+        assert {r["index"] for r in d.rejected} == set(s.disturbed)
+
+
+@pytest.mark.parametrize(
+    "effect, model",
+    [("soft_iron", "sphere"), ("hard_iron_drift", "full"), ("temperature_bias", "full")],
+)
+def test_mag_effect_is_found(effect, model):
+    _, d = run_mag((effect,), model=model)
+    assert d.effects == [effect], d.rounds
+    assert d.rms_after <= 1.5 * d.noise_floor, d.summary()
+    assert not d.unexplained_structure
+
+
+def test_two_effects_at_once():
+    _, d = run_accel(("bias_drift", "scale_nonlinearity"))
+    assert sorted(d.effects) == ["bias_drift", "scale_nonlinearity"]
+    assert d.rms_after <= 1.5 * d.noise_floor
+    assert "scale_nonlinearity" in d.groups  # reported as a group, not a confident pick
+
+
+def test_clean_logs_add_nothing():
+    """The issue: over at least 20 seeds at most one false addition."""
+    false = []
+    for seed in range(100, 120):
+        _, d = run_accel((), seed=seed)
+        if d.effects or d.unexplained_structure:
+            false.append((seed, d.effects, d.unexplained_structure))
+        assert d.verdict in ("at_floor", "effects_added", "unexplained_structure")
+    assert len(false) <= 1, false
+
+
+def test_effect_outside_the_catalogue_is_reported_unexplained():
+    """A bias that oscillates 3 times over the log: no catalogue effect fits it; the residual
+    must be flagged, naming time as the driver."""
+    _, d = run_accel(("periodic_bias",))
+    assert d.unexplained_structure
+    assert d.verdict == "unexplained_structure"
+    drivers = [s["driver"] for s in d.structure if s["above_floor"]]
+    assert "time" in drivers
+    assert any("time" in n for n in d.notes)
+
+
+def test_too_few_poses_is_its_own_verdict():
+    _, d = run_accel((), poses=10)
+    assert d.verdict == "not_possible"
+    assert "10 static intervals for 9 parameters" in d.notes[0]
+    assert d.to_dict()["steps"] == []
+
+
+# ----------------------------------------------------------------------------- real logs
+
+
+def test_xsens_is_at_the_floor_with_nine_parameters():
+    """imu_tk Xsens (38 poses): the issue's analysis found white 0.034 mg, Allan 0.12 mg,
+    residual 0.10 mg and nothing to add. Here: white 0.031, Allan 0.098, residual 0.100 (the
+    static detector's intervals differ slightly from that analysis; 25 % bounds)."""
+    d = diagnose_accel(load_log(demo_log_path(), columns="t,ax,ay,az"))
+    assert d.effects == []
+    assert d.verdict == "at_floor"
+    assert d.n_observations == 38
+    assert d.noise_floor_white == pytest.approx(0.034e-3, rel=0.25)
+    assert d.noise_floor_allan == pytest.approx(0.12e-3, rel=0.25)
+    assert d.rms_after == pytest.approx(0.10e-3, rel=0.1)
+
+
+def test_ckexplorer_scale_asymmetry(tmp_path):
+    """CK-Explorer tumble, 160 poses of 100 samples. The issue's analysis: a +g/-g asymmetry of
+    about +4 mg on y and -3 mg on z, residual about 1.04 -> 0.75 mg. Found here: the same sizes
+    with the opposite sign, because calib_jax reports the asymmetry of the READING
+    ((|y(+g)| - |y(-g)|) / 2 = q, -3.9 mg on y, +3.2 mg on z) and the issue's numbers are the
+    correction coefficient (a = y + c y^2, c = -q). Through the CLI."""
+    out = tmp_path / "ck.json"
+    rep = tmp_path / "report"
+    rc = main(
+        ["diagnose", str(accel_tumble_log_path()), "--block", "100", "--json", str(out),
+         "--report", str(rep)]
+    )  # fmt: skip
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert d["effects"] == ["scale_nonlinearity"]
+    assert d["rms_before"] == pytest.approx(1.04e-3, rel=0.05)
+    assert d["rms_after"] == pytest.approx(0.75e-3, rel=0.05)
+    asym = np.array(d["steps"][-1]["coefficients"]["scale_asymmetry"]["value"])
+    se = np.array(d["steps"][-1]["coefficients"]["scale_asymmetry"]["stderr"])
+    assert asym[1] == pytest.approx(-4e-3, abs=3 * se[1])
+    assert asym[2] == pytest.approx(3e-3, abs=3 * se[2])
+    assert abs(asym[0]) < 3 * se[0] + 1e-3
+    assert [s["model"] for s in d["steps"]][0] == "base"
+    for k in ("model", "added_effect", "n_params", "rms", "bic", "loo_rms"):
+        assert k in d["steps"][0]
+    for k in ("noise_floor", "noise_floor_white", "noise_floor_allan", "unexplained_structure"):
+        assert k in d
+    assert sorted(p.name for p in rep.iterdir()) == [
+        "model_comparison.png",
+        "residual_motion.png",
+        "residual_sphere.png",
+        "residual_time.png",
+    ]
+
+
+def test_qmc_filtered_hard_iron_drift_and_noisy_null():
+    """QMC5883L: the filtered log's centre drifts (hard_iron_drift accepted); on the noisy log
+    the polynomial terms that BIC alone would take are rejected (null test, split halves or
+    plausibility) and nothing is added."""
+    filt = diagnose_mag(load_log(qmc_log_path("filtered")))
+    assert "hard_iron_drift" in filt.effects
+    drift = np.asarray(filt.steps[-1]["coefficients"]["drift1"]["value"])
+    assert 0.005 < np.linalg.norm(drift) < 0.05  # a percent-level move of the centre
+    noisy = diagnose_mag(load_log(qmc_log_path("noisy")))
+    assert "scale_nonlinearity" not in noisy.effects
+    assert "hard_iron_drift" not in noisy.effects
+    nl = [e for e in noisy.rounds[0] if e["effect"] == "scale_nonlinearity"][0]
+    assert nl["tests"]["bic"] and not nl["accepted"]  # BIC alone would have taken it
