@@ -2,6 +2,7 @@
 
 from .floors import allan_deviation, white_floor
 from .loop import CATALOGUE, Diagnosis, diagnose_accel, diagnose_mag
+from .marg import diagnose_marg
 
 __all__ = [
     "CATALOGUE",
@@ -9,5 +10,6 @@ __all__ = [
     "allan_deviation",
     "diagnose_accel",
     "diagnose_mag",
+    "diagnose_marg",
     "white_floor",
 ]

@@ -12,11 +12,12 @@ def add_parser(sub) -> None:
         "diagnose",
         help="trace the residual of a calibration to effects its model lacks",
         description="Fit the declared model, measure the noise floors, add catalogue effects "
-        "(bias drift, temperature, scale nonlinearity, outliers, hard-iron drift, soft iron) "
+        "(bias drift, temperature, scale nonlinearity, outliers, hard-iron drift, soft iron; "
+        "for MARG the accel-mag misalignment and timing offset) "
         "only where every acceptance test passes, and report the error before and after.",
     )
     p.add_argument("file", help="log file (CSV/TSV/text/.mat)")
-    p.add_argument("--sensor", choices=("accel", "mag"), default="accel")
+    p.add_argument("--sensor", choices=("accel", "mag", "marg"), default="accel")
     p.add_argument("--columns", help="column mapping for headerless files, e.g. t,ax,ay,az")
     p.add_argument("--sample-rate", type=float, help="Hz, when the log has no time column")
     p.add_argument(
@@ -49,6 +50,22 @@ def run(args: argparse.Namespace) -> int:
     if args.sensor == "accel":
         d = diagnose_accel(
             log, sample_rate=args.sample_rate, block=args.block, degree=args.degree, seed=args.seed
+        )
+    elif args.sensor == "marg":
+        from .marg import diagnose_marg
+
+        if log.acc is None or log.mag is None:
+            raise ValueError(
+                f"{args.file}: --sensor marg needs accelerometer and magnetometer columns "
+                "(ax, ay, az, mx, my, mz); map them with --columns"
+            )
+        d = diagnose_marg(
+            log.acc,
+            log.mag,
+            t=log.t,
+            sample_rate=args.sample_rate or log.sample_rate,
+            seed=args.seed,
+            source=log.path,
         )
     else:
         d = diagnose_mag(

@@ -327,7 +327,7 @@ class Diagnosis:
         return _jsonable({k: getattr(self, k) for k in keys})
 
     def summary(self) -> str:
-        u, f = (" mg", 1e3) if self.sensor == "accel" else (" %", 1e2)
+        u, f = {"accel": (" mg", 1e3), "mag": (" %", 1e2)}.get(self.sensor, (" deg", 180 / math.pi))
         lines = [f"diagnosis ({self.sensor}, {self.n_observations} {self.observations}):"]
         for s in self.steps:
             lines.append(

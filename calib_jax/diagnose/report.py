@@ -5,6 +5,8 @@
   the calibrated vector), before and after, with the coverage gaps;
 * ``residual_motion.png``: the residual against within-observation motion, rejected outliers
   labelled;
+* ``angle_time.png`` (MARG, instead of the sphere and motion figures): the gravity-field
+  angle over time, before and after;
 * ``model_comparison.png``: every candidate of every round with its BIC gain, the best null
   gain, the leave-one-out gain and the split-half z, accepted ones marked.
 """
@@ -20,7 +22,7 @@ from .loop import Diagnosis, _calibrated
 
 
 def _scale(d: Diagnosis) -> tuple[float, str]:
-    return (1e3, "mg") if d.sensor == "accel" else (1e2, "% of field")
+    return {"accel": (1e3, "mg"), "mag": (1e2, "% of field")}.get(d.sensor, (180 / np.pi, "deg"))
 
 
 def _lonlat(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -41,7 +43,7 @@ def residual_time(d: Diagnosis) -> Figure:
     if (~act).any():
         ax.plot(t[~act], d.e_base[~act] * f, "kx", ms=7, label="rejected")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel(f"|y| - 1 [{unit}]")
+    ax.set_ylabel(f"{'angle - fitted' if d.sensor == 'marg' else '|y| - 1'} [{unit}]")
     ax.set_title(f"residual against time: {', '.join(d.effects) or 'nothing added'}")
     ax.legend(fontsize=8, loc="upper right")
     return fig
@@ -126,6 +128,23 @@ def model_comparison(d: Diagnosis) -> Figure:
     return fig
 
 
+def angle_time(d: Diagnosis) -> Figure:
+    """MARG: the gravity-field angle over time, before (same frame and clock) and after."""
+    fig = Figure(figsize=(9, 4), layout="constrained")
+    ax = fig.add_subplot()
+    t = d.obs.t
+    for name, theta, e, c in (
+        ("before", d.theta_base, d.e_base, "tab:red"),
+        ("after", d.theta_final, d.e_final, "tab:blue"),
+    ):
+        ax.plot(t, np.degrees(theta[3] + e), ".", ms=2, color=c, label=f"{name}")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("angle between gravity and field [deg]")
+    ax.set_title(f"gravity-field angle: {', '.join(d.effects) or 'nothing added'}", fontsize=9)
+    ax.legend(fontsize=8)
+    return fig
+
+
 def write_report(d: Diagnosis, outdir: str | Path) -> list[Path]:
     """Write the figures (PNG) into ``outdir``; returns their paths. A diagnosis that was not
     possible has nothing to draw."""
@@ -134,12 +153,16 @@ def write_report(d: Diagnosis, outdir: str | Path) -> list[Path]:
     if d.obs is None:
         return []
     paths = []
-    for name, fn in (
-        ("residual_time", residual_time),
-        ("residual_sphere", residual_sphere),
-        ("residual_motion", residual_motion),
-        ("model_comparison", model_comparison),
-    ):
+    figures = (
+        [("residual_time", residual_time), ("angle_time", angle_time)]
+        if d.sensor == "marg"
+        else [
+            ("residual_time", residual_time),
+            ("residual_sphere", residual_sphere),
+            ("residual_motion", residual_motion),
+        ]
+    )
+    for name, fn in [*figures, ("model_comparison", model_comparison)]:
         p = out / f"{name}.png"
         fn(d).savefig(p, dpi=110)
         paths.append(p)

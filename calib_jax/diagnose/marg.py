@@ -1,0 +1,401 @@
+"""Close the loop on a MARG log: the gravity-field angle.
+
+After each sensor is calibrated on its own (accelerometer and magnetometer ellipsoids), the
+angle between gravity and the field must be constant (90 deg + dip). The declared model says
+the two sensors share a frame and a clock:
+
+    e_i = angle(a(t_i), R P m(t_i + dt)) - theta          (radians)
+
+with R = I, P = I, dt = 0 in the base model (theta alone is fitted). Candidates:
+
+* ``sensor_misalignment``: the 48 signed axis permutations are scored first (the spread of
+  a . P m), then R = exp([v]x) (3 parameters) is fitted with the best P;
+* ``timing_offset``: dt (1 parameter), the magnetometer interpolated linearly between its
+  samples (the full-rate series, so dt is not limited to the observation spacing).
+
+The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, leave-one-out, split
+halves, a null test with block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond
+the permutation, |dt| <= 0.5 s), and the floors come from the longest rest.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..lm import is_converged, lm_solve
+from ..rotations import describe_permutation, rotvec_to_dcm, signed_permutations
+from ..static import detect_static
+from .floors import allan_deviation
+from .loop import (
+    BIC_MIN,
+    HALVES_Z,
+    LOO_GAIN,
+    MIN_OBSERVATIONS,
+    NULL_SIMS,
+    Diagnosis,
+    Observations,
+    _not_possible,
+)
+
+N_P = 5  # rotvec (3), theta, dt
+SLOTS = {"sensor_misalignment": [0, 1, 2], "timing_offset": [4]}
+BOUNDS = {"rotation_deg": 15.0, "dt_s": 0.5}
+
+
+def _interp(t, tm, m):
+    return jnp.stack([jnp.interp(t, tm, m[:, j]) for j in range(3)], axis=1)
+
+
+def angle_residual(p, data):
+    """Data rows e_i (radians), then the pinning rows of parameters that are not free."""
+    a, t, tm, m, P, free = data
+    q = jnp.where(free, p, 0.0)
+    mi = _interp(t + q[4], tm, m)
+    mi = mi / jnp.linalg.norm(mi, axis=1, keepdims=True)
+    Rm = mi @ (rotvec_to_dcm(q[:3]) @ P).T
+    c = jnp.sum(a * Rm, axis=1)
+    s = jnp.linalg.norm(jnp.cross(a, Rm), axis=1)
+    return jnp.concatenate([jnp.arctan2(s, c) - p[3], jnp.where(free, 0.0, p)])
+
+
+def _fit_one(p0, a, t, tm, m, P, w, free):
+    n = a.shape[0]
+    data = (a, t, tm, m, P, free)
+    res = lm_solve(
+        angle_residual,
+        p0,
+        data,
+        weights=jnp.concatenate([w, jnp.ones(N_P, w.dtype)]),
+        update_type=1,
+        dof=jnp.sum(w > 0) - jnp.sum(free),
+        max_iter=100,
+        covariance_method="cholesky",
+    )
+    e = angle_residual(res.params, data)[:n]
+    J = jax.jacfwd(angle_residual)(res.params, data)[:n]
+    return res.params, res.stderr, res.status, e, J
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled():
+    return jax.jit(jax.vmap(_fit_one))
+
+
+def _summary(p, se, status, e, J, w, free) -> dict:
+    act = w > 0
+    m = int(act.sum())
+    k = int(free.sum())
+    rss = float(np.sum(w * e * e))
+    Jf = J[:, free] * np.sqrt(w)[:, None]
+    C = np.linalg.pinv(Jf.T @ Jf)
+    h = np.einsum("ij,jk,ik->i", Jf, C, Jf)
+    loo = e / np.clip(1 - h, 1e-6, None)
+    return {
+        "theta": p,
+        "stderr": se,
+        "converged": is_converged(int(status)),
+        "e": e,
+        "loo": loo,
+        "rms": math.sqrt(rss / m),
+        "bic": m * math.log(rss / m) + k * math.log(m),
+        "loo_rms": float(np.sqrt(np.mean(loo[act] ** 2))),
+        "n_params": k,
+        "m": m,
+    }
+
+
+def _run(rows, a, t, tm):
+    """rows: (p0, m_series, P, w, free) per problem; one vmapped call."""
+    n = len(rows)
+    p0 = np.stack([r[0] for r in rows])
+    ms = np.stack([r[1] for r in rows])
+    Ps = np.stack([r[2] for r in rows])
+    w = np.stack([r[3] for r in rows])
+    fr = np.stack([r[4] for r in rows])
+    out = _compiled()(
+        jnp.asarray(p0),
+        jnp.broadcast_to(jnp.asarray(a), (n, *a.shape)),
+        jnp.broadcast_to(jnp.asarray(t), (n, *t.shape)),
+        jnp.broadcast_to(jnp.asarray(tm), (n, *tm.shape)),
+        jnp.asarray(ms),
+        jnp.asarray(Ps),
+        jnp.asarray(w),
+        jnp.asarray(fr),
+    )
+    out = [np.asarray(o) for o in out]
+    return [_summary(*(o[k] for o in out), w[k], fr[k]) for k in range(n)]
+
+
+def _angles(a, m):
+    return np.arctan2(np.linalg.norm(np.cross(a, m), axis=1), np.sum(a * m, axis=1))
+
+
+def _null_series(a_full, m_full, tm, R, dt, theta, eps_obs, t_obs, rng, L):
+    """Full-rate magnetometer series on the current model (R, dt, theta) whose angle errors
+    are block-bootstrapped from the observation residuals."""
+    n = len(eps_obs)
+    starts = rng.integers(0, n, size=-(-n // L))
+    idx = np.concatenate([(np.arange(s, s + L) % n) for s in starts])[:n]
+    eps = eps_obs[idx]
+    # nearest observation's error at every full-rate sample
+    j = np.clip(np.searchsorted(t_obs, tm), 0, n - 1)
+    target = theta + eps[j]
+    # the model's magnetometer at the accelerometer's times, in the accelerometer frame
+    ms = np.stack([np.interp(tm + dt, tm, m_full[:, k]) for k in range(3)], axis=1)
+    ms = ms / np.linalg.norm(ms, axis=1, keepdims=True)
+    Rm = ms @ R.T
+    # rotate Rm in the plane (a, Rm) to make the target angle with a
+    perp = Rm - np.sum(Rm * a_full, axis=1, keepdims=True) * a_full
+    perp /= np.linalg.norm(perp, axis=1, keepdims=True)
+    new = np.cos(target)[:, None] * a_full + np.sin(target)[:, None] * perp
+    back = new @ R  # to the magnetometer frame
+    # undo the time shift: the simulated series at time s is "back" at s - dt
+    return np.stack([np.interp(tm - dt, tm, back[:, k]) for k in range(3)], axis=1)
+
+
+def diagnose_marg(
+    acc: np.ndarray,
+    mag: np.ndarray,
+    *,
+    t: np.ndarray | None = None,
+    sample_rate: float | None = None,
+    max_points: int = 3000,
+    static_tol: float = 0.05,
+    seed: int = 0,
+    source: str | None = None,
+) -> Diagnosis:
+    """The loop on simultaneous accelerometer and magnetometer samples (module docstring).
+
+    ``acc`` and ``mag`` are raw (N, 3); each is calibrated first with
+    :func:`calib_jax.calibrate_mag` (``sensor="accel"`` for the accelerometer). Observations
+    are quasi-static samples (|a| within ``static_tol`` of g), every k-th to at most
+    ``max_points``. rms values are in radians (the summary prints degrees).
+    """
+    from ..mag import calibrate_mag
+
+    acc = np.asarray(acc, float)
+    mag = np.asarray(mag, float)
+    if acc.shape != mag.shape or acc.ndim != 2 or acc.shape[1] != 3:
+        raise ValueError(f"acc and mag must both be (N, 3), got {acc.shape} and {mag.shape}")
+    N = len(acc)
+    t = np.arange(N) / (sample_rate or 1.0) if t is None else np.asarray(t, float)
+    ok = np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
+    ca = calibrate_mag(acc[ok], sensor="accel", field=1.0, model="full")
+    cm = calibrate_mag(mag[ok], model="full")
+    A = (acc - ca.center) @ np.asarray(ca.soft_iron).T
+    Mg = (mag - cm.center) @ np.asarray(cm.soft_iron).T
+    # the full-rate series (finite rows) for interpolation
+    tm, Mf, Af = t[ok], Mg[ok], A[ok]
+    na = np.linalg.norm(Af, axis=1)
+    quiet = np.abs(na - 1.0) < static_tol
+    k = max(1, -(-int(quiet.sum()) // max_points))
+    keep = np.flatnonzero(quiet)[::k]
+    keep = keep[(keep > 0) & (keep < len(tm) - 1)]  # room to interpolate either way
+    m = len(keep)
+    if m < MIN_OBSERVATIONS:
+        return _not_possible(
+            "marg",
+            m,
+            f"{MIN_OBSERVATIONS} quasi-static samples",
+            "too few quasi-static samples",
+            source,
+        )
+    a = Af[keep] / na[keep, None]
+    tob = tm[keep]
+    Mn = Mf / np.linalg.norm(Mf, axis=1, keepdims=True)
+    Afn = Af / na[:, None]
+    eye = np.eye(3)
+    theta0 = float(np.mean(_angles(a, Mn[keep])))
+    base_free = np.array([False, False, False, True, False])
+    w = np.ones(m)
+    [base] = _run([(np.array([0, 0, 0, theta0, 0.0]), Mf, eye, w, base_free)], a, tob, tm)
+    # permutation search for the misalignment candidate
+    Ps = signed_permutations()
+    spreads = np.array([np.std(np.sum(a * (Mn[keep] @ P.T), axis=1)) for P in Ps])
+    det_tie = np.where(np.linalg.det(Ps) > 0, 0.0, 1.0)
+    P_best = Ps[int(np.lexsort((det_tie, np.round(spreads, 12)))[0])]
+    notes = ["angles in radians in the JSON; the summary prints degrees"]
+    order = np.arange(m)
+    first = (order * 8 // m) % 2 == 0
+    rng = np.random.default_rng(seed)
+    L = max(1, int(round(m ** (1 / 3))))
+    cur, free, P_cur, effects, steps, rounds = base, base_free.copy(), eye, [], [], []
+    steps.append(_step("base", None, base))
+    remaining = ["sensor_misalignment", "timing_offset"]
+    for _ in range(2):
+        rows, idx = [], {}
+        th = cur["theta"]
+        R_cur = np.asarray(rotvec_to_dcm(jnp.asarray(th[:3] * free[:3]))) @ P_cur
+        nulls = [
+            _null_series(Afn, Mf, tm, R_cur, th[4] * free[4], th[3], cur["e"], tob, rng, L)
+            for _ in range(NULL_SIMS)
+        ]
+        for c in remaining:
+            fc = free.copy()
+            fc[SLOTS[c]] = True
+            P = P_best if c == "sensor_misalignment" else P_cur
+            idx[c] = len(rows)
+            rows += [
+                (th, Mf, P, w, fc),
+                (th, Mf, P, w * first, fc),
+                (th, Mf, P, w * ~first, fc),
+            ]
+            rows += [(th, nm, P, w, fc) for nm in nulls]
+        nb0 = len(rows)
+        rows += [(th, nm, P_cur, w, free) for nm in nulls]
+        fits = _run(rows, a, tob, tm)
+        nb = [f["bic"] for f in fits[nb0:]]
+        log, best = [], None
+        for c in remaining:
+            i = idx[c]
+            fit, h1, h2 = fits[i], fits[i + 1], fits[i + 2]
+            dbic = cur["bic"] - fit["bic"]
+            null_gain = max(nb[k] - fits[i + 3 + k]["bic"] for k in range(NULL_SIMS))
+            sl = SLOTS[c]
+            zh = np.abs(h1["theta"][sl] - h2["theta"][sl]) / np.sqrt(
+                h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2
+            )
+            rot = math.degrees(float(np.linalg.norm(fit["theta"][:3])))
+            plaus = rot <= BOUNDS["rotation_deg"] and abs(fit["theta"][4]) <= BOUNDS["dt_s"]
+            tests = {
+                "converged": fit["converged"],
+                "bic": dbic > BIC_MIN,
+                "loo": 1 - fit["loo_rms"] / cur["loo_rms"] > LOO_GAIN,
+                "halves": bool(np.all(np.isfinite(zh)) and np.max(zh) < HALVES_Z),
+                "null": dbic > null_gain,
+                "plausible": bool(plaus),
+            }
+            entry = {
+                "effect": c,
+                "accepted": all(tests.values()),
+                "delta_bic": dbic,
+                "loo_gain": 1 - fit["loo_rms"] / cur["loo_rms"],
+                "halves_max_z": float(np.max(zh)),
+                "null_max_delta_bic": null_gain,
+                "rms": fit["rms"],
+                "loo_rms": fit["loo_rms"],
+                "tests": tests,
+            }
+            if c == "sensor_misalignment":
+                entry["permutation"] = describe_permutation(P_best)
+                entry["rotation_deg"] = rot
+            else:
+                entry["dt_s"] = float(fit["theta"][4])
+            log.append(entry)
+            if entry["accepted"] and (best is None or dbic > best[1]):
+                best = (c, dbic, fit)
+        rounds.append(log)
+        if best is None:
+            break
+        c, _, fit = best
+        cur = fit
+        free[SLOTS[c]] = True
+        if c == "sensor_misalignment":
+            P_cur = P_best
+        effects.append(c)
+        remaining.remove(c)
+        steps.append(_step("+".join(["base", *effects]), c, fit))
+        st = steps[-1]
+        if c == "sensor_misalignment":
+            st["coefficients"] = {
+                "permutation": describe_permutation(P_cur),
+                "rotvec_deg": np.degrees(fit["theta"][:3]),
+                "rotvec_stderr_deg": np.degrees(fit["stderr"][:3]),
+            }
+        else:
+            st["coefficients"] = {
+                "dt_s": float(fit["theta"][4]),
+                "dt_stderr_s": float(fit["stderr"][4]),
+            }
+    # floors: the angle over the longest rest, with the final model's rotation
+    R_fin = np.asarray(rotvec_to_dcm(jnp.asarray(cur["theta"][:3] * free[:3]))) @ P_cur
+    Mn = Mn @ R_fin.T
+    rep = detect_static(A, sample_rate=sample_rate, valid=ok)
+    ang_full = _angles(Afn, Mn)
+    if rep.intervals:
+        iv = max(rep.intervals, key=lambda v: v.n)
+        rest = _angles(Afn[iv.start : iv.stop], Mn[iv.start : iv.stop])
+        tr = np.arange(len(rest)) / len(rest)
+        white = float(np.std(rest - np.polyval(np.polyfit(tr, rest, 2), tr), ddof=3))
+        allan = allan_deviation(rest, 1)
+        notes.append(f"floors from the longest rest ({iv.n} samples)")
+    else:
+        d = np.diff(ang_full)
+        white = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
+        allan = float("nan")
+        notes.append("no rest in the log: white floor from first differences, no Allan floor")
+    floor = float(np.nanmax([white, allan]))
+
+    rms_before = base["rms"]
+    rms_after = cur["rms"]
+    dip = math.degrees(cur["theta"][3]) - 90.0
+    notes.append(f"dip {dip:.2f} deg (angle between gravity and field minus 90)")
+    excess = rms_after > 2 * floor
+    if excess:
+        notes.append(
+            f"rms after ({math.degrees(rms_after):.3g} deg) is {rms_after / floor:.1f}x the "
+            "floor: the angle still varies more than noise (motion, disturbed field, or "
+            "calibration errors of either sensor)"
+        )
+    elif rms_after <= 1.5 * floor:
+        notes.append("at the noise floor: nothing beyond noise")
+    obs = Observations(
+        x=a,
+        t=tob,
+        temp=None,
+        motion=np.zeros(m),
+        spans=[(int(i), int(i) + 1) for i in keep],
+        c0=np.zeros(3),
+        k0=1.0,
+        theta0=np.zeros(5),
+        base="marg",
+        sensor="marg",
+        kind=f"quasi-static samples (every {k})",
+    )
+    return Diagnosis(
+        sensor="marg",
+        verdict="unexplained_structure" if excess else ("effects_added" if effects else "at_floor"),
+        steps=steps,
+        effects=effects,
+        rms_before=rms_before,
+        rms_after=rms_after,
+        noise_floor=floor,
+        noise_floor_white=white,
+        noise_floor_allan=allan,
+        unexplained_structure=bool(excess),
+        structure=[],
+        notes=notes,
+        rejected=[],
+        rounds=rounds,
+        groups={},
+        n_observations=m,
+        observations=obs.kind,
+        units="radians (angle between gravity and field)",
+        source=source,
+        obs=obs,
+        theta_base=base["theta"],
+        theta_final=cur["theta"],
+        free_base=base_free,
+        free_final=free,
+        weights_final=w,
+        e_base=base["e"],
+        e_final=cur["e"],
+    )
+
+
+def _step(label, effect, fit) -> dict:
+    return {
+        "model": label,
+        "added_effect": effect,
+        "n_params": fit["n_params"],
+        "rms": fit["rms"],
+        "bic": fit["bic"],
+        "loo_rms": fit["loo_rms"],
+        "n_observations": fit["m"],
+        "n_rejected": 0,
+    }
