@@ -582,11 +582,19 @@ def _run(
 def _structure(obs, e, w, theta, free, floor) -> list[dict]:
     """Regress the final residual on every driver; F-test each against a constant."""
     act = w > 0
-    e = e[act]
-    m = len(e)
     tau, T = obs.tau()[act], obs.T()[act]
     y = _calibrated(theta, free, obs.x[act], tau, T)
     u = y / np.linalg.norm(y, axis=1, keepdims=True)
+    has_T = obs.temp is not None and np.ptp(obs.temp) > 0
+    return regress_drivers(
+        e[act], driver_designs(u, tau, T if has_T else None, obs.motion[act]), floor
+    )
+
+
+def driver_designs(u, tau, T, motion) -> dict[str, np.ndarray]:
+    """Design matrices of the drivers: time, temperature (T None: none), orientation (u: the
+    unit direction of each observation), motion."""
+    m = len(u)
     drivers = {}
     # time: a magnitude that follows time, and (bias-like) a vector effect that follows time,
     # seen in the norm as u . b(t): products of the direction with the time basis
@@ -603,7 +611,7 @@ def _structure(obs, e, w, theta, free, floor) -> list[dict]:
         [*f, np.sin(2 * np.pi * np.outer(tau, k)), np.cos(2 * np.pi * np.outer(tau, k))]
     )
     drivers["time"] = np.column_stack([f, *(u[:, [j]] * f for j in range(3))])
-    if obs.temp is not None and np.ptp(obs.temp) > 0:
+    if T is not None:
         ft = np.column_stack([T, T**2])
         drivers["temperature"] = np.column_stack([ft, *(u[:, [j]] * ft for j in range(3))])
     X, Y, Z = u.T
@@ -622,10 +630,17 @@ def _structure(obs, e, w, theta, free, floor) -> list[dict]:
             Z * Z * Y,
         ]
     drivers["orientation"] = np.column_stack(orient)
-    mo = obs.motion[act]
+    mo = motion
     if np.all(np.isfinite(mo)) and np.ptp(mo) > 0:
         mo = (mo - mo.mean()) / mo.std()
         drivers["motion"] = np.column_stack([mo, mo**2])
+    return drivers
+
+
+def regress_drivers(e, drivers, floor) -> list[dict]:
+    """F-test of each driver's design against a constant; structure "above the floor" when
+    significant (Bonferroni over drivers) and at least a fifth of the floor in size."""
+    m = len(e)
     out = []
     rss0 = float(np.sum((e - e.mean()) ** 2))
     for name, D in drivers.items():

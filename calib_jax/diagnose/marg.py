@@ -40,6 +40,8 @@ from .loop import (
     Diagnosis,
     Observations,
     _not_possible,
+    driver_designs,
+    regress_drivers,
 )
 
 N_P = 5  # rotvec (3), theta, dt
@@ -335,8 +337,18 @@ def diagnose_marg(
     rms_after = cur["rms"]
     dip = math.degrees(cur["theta"][3]) - 90.0
     notes.append(f"dip {dip:.2f} deg (angle between gravity and field minus 90)")
-    excess = rms_after > 2 * floor
-    if excess:
+    # structure left in the angle: time, orientation of gravity, motion (rate of change of a)
+    tau = (tob - tob.min()) / max(np.ptp(tob), 1e-12) - 0.5
+    rate = np.linalg.norm(np.gradient(Afn, axis=0), axis=1)[keep]
+    structure = regress_drivers(cur["e"], driver_designs(a, tau, None, rate), floor)
+    for s_ in structure:
+        if s_["above_floor"]:
+            notes.append(
+                f"the angle follows {s_['driver']} (p = {s_['p_value']:.1e}, size "
+                f"{math.degrees(s_['size']):.3g} deg) and no catalogue effect explains it"
+            )
+    excess = rms_after > 2 * floor or any(s_["above_floor"] for s_ in structure)
+    if rms_after > 2 * floor:
         notes.append(
             f"rms after ({math.degrees(rms_after):.3g} deg) is {rms_after / floor:.1f}x the "
             "floor: the angle still varies more than noise (motion, disturbed field, or "
@@ -368,7 +380,7 @@ def diagnose_marg(
         noise_floor_white=white,
         noise_floor_allan=allan,
         unexplained_structure=bool(excess),
-        structure=[],
+        structure=structure,
         notes=notes,
         rejected=[],
         rounds=rounds,
