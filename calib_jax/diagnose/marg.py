@@ -354,7 +354,7 @@ def diagnose_marg(
             "floor: the angle still varies more than noise (motion, disturbed field, or "
             "calibration errors of either sensor)"
         )
-    elif rms_after <= 1.5 * floor:
+    elif rms_after <= 1.5 * floor and not excess:
         notes.append("at the noise floor: nothing beyond noise")
     obs = Observations(
         x=a,
