@@ -12,6 +12,9 @@ each device's accumulated accelerometer data and reports what paper 1's protocol
 * for a magnetometer, the share of the sphere of field directions covered
   (:func:`calib_jax.mag.sphere_coverage`, 100 equal-area cells) and the faces not yet seen.
 
+With ``resume``, the rows already in a log count towards its coverage (they are calibrated
+too). A log this session wrote nothing into is not calibrated as if it were this session's.
+
 The session stops at ``seconds``, when every device's coverage is enough (``auto_stop``), when
 every device has gone away for longer than ``max_reconnect_seconds``, or on Ctrl-C; the logs
 are flushed and synced in every case. Then each log is read back with
@@ -39,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.serial import Batch, SerialReader
+from .io.serial import Batch, SerialReader, log_columns
 from .static import detect_static, distinct_directions
 
 PAPER1_POSES = 48
@@ -335,6 +338,8 @@ def record_session(
             url, log=path, on_message=lambda s, tag=tag: say(tag + s), **reader_options
         )
         devices.append(Device(url=url, path=path, reader=reader))
+        if reader_options.get("resume"):
+            _seed_from_log(devices[-1], say)
     stop = threading.Event()
     for dev in devices:
         dev.thread = threading.Thread(
@@ -393,6 +398,25 @@ def record_session(
     return Session(devices=devices, sensor=sensor, reason=reason, seconds=elapsed)
 
 
+def _seed_from_log(dev: Device, say: Callable[[str], None]) -> None:
+    """A resumed log's rows count towards the coverage, as they count in the fit."""
+    from .io.files import load_log
+
+    if not dev.path.exists() or dev.path.stat().st_size == 0:
+        return
+    try:
+        lg = load_log(dev.path)
+    except ValueError as exc:
+        say(f"{dev.path}: its rows do not count towards the coverage shown ({exc})")
+        return
+    if not len(lg):
+        return
+    t = lg.t if lg.t is not None else np.zeros(len(lg))
+    cols = tuple(log_columns(list(lg.columns)))
+    dev.batches.append(Batch(t=t, acc=lg.acc, gyro=lg.gyro, mag=lg.mag, temp=lg.temp, columns=cols))
+    say(f"{dev.path}: {len(lg)} rows from before count towards the coverage")
+
+
 def _assess(devices, sensor, window, min_static, target_poses, mag_target) -> None:
     for dev in devices:
         b = dev.data()
@@ -412,7 +436,10 @@ def _progress(devices: list[Device], elapsed: float) -> str:
     parts = []
     for k, dev in enumerate(devices):
         tag = f"[{k}] " if len(devices) > 1 else ""
-        state = "" if dev.reader.status == "connected" else f" ({dev.reader.status})"
+        status = dev.reader.status
+        state = "" if status in ("connected", "closed") else f" ({status})"
+        if dev.error:
+            state = f" (stopped on an error: {dev.error})"
         parts.append(f"{tag}{dev.coverage.line()}{state}")
     sep = "\n  " if len(parts) > 1 else ""
     return f"{elapsed:6.1f} s  " + sep + sep.join(parts)
@@ -663,13 +690,21 @@ def run(args) -> int:
         overwrite=args.overwrite,
         max_reconnect_seconds=args.max_reconnect,
     )
-    paths = [d.path for d in session.devices if d.path.exists()]
-    if len(paths) < len(session.devices):
-        missing = [str(d.path) for d in session.devices if not d.path.exists()]
+    # what gets calibrated is each log as it is on disk: this session's lines, plus the earlier
+    # ones with --resume; a file this session wrote nothing into is not this session's result
+    empty = [
+        d
+        for d in session.devices
+        if not d.path.exists() or (d.reader.stats.lines_ok == 0 and not args.resume)
+    ]
+    if empty:
+        old = [str(d.path) for d in empty if d.path.exists()]
         raise ValueError(
-            f"nothing was recorded into {', '.join(missing)} (no well-formed line arrived); "
-            "check --port, --baud and --columns"
+            f"nothing was recorded into {', '.join(str(d.path) for d in empty)} (no well-formed "
+            "line arrived); check --port, --baud and --columns"
+            + (f"; {', '.join(old)} is left as it was" if old else "")
         )
+    paths = [d.path for d in session.devices]
     try:
         if len(session.devices) == 1:
             dev = session.devices[0]
@@ -696,6 +731,7 @@ def run(args) -> int:
                 solver=args.solver,
             )
             ok = session_ok(res)
+        ok &= not any(d.error for d in session.devices)  # said at the end of the session
     except ValueError as exc:
         raise ValueError(
             f"{exc}\nthe recording is kept in {', '.join(map(str, paths))}; add to it with "

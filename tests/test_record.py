@@ -6,6 +6,7 @@ import json
 import os
 import signal
 import threading
+import tty
 
 import numpy as np
 
@@ -163,11 +164,72 @@ def test_record_command_two_boards_one_batch_fit(tmp_path, capsys, tol):
             p - truth["accel_params"]
         ) / se
         assert f"rec.dev{k}.calib.json" in captured.out
-    # each device's log is what `calib-jax accel FILE` reads
-    assert (
-        main(["accel", str(tmp_path / "rec.dev1.csv"), "--window", "25", "--min-static", "0.5"])
-        == 0
-    )
+    # each device's log is what `calib-jax accel FILE` reads (lm2: the solver the other
+    # recordings here are calibrated with, so this reuses its compilation)
+    dev1 = str(tmp_path / "rec.dev1.csv")
+    assert main(["accel", dev1, "--window", "25", "--min-static", "0.5", "--solver", "lm2"]) == 0
+
+
+def _write_log(path, session, columns=("t", "ax", "ay", "az")):
+    """A log as a recording writes it, from a simulated session."""
+    w = LogWriter(path)
+    w.open(list(columns))
+    data = {"t": session["t"][:, None], "ax": session["acc"], "mx": session["mag"]}
+    for row in np.column_stack([data[c] for c in columns if c in data]):
+        w.append(format_row(row))
+    w.close()
+
+
+def _silent_port():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    return master, slave
+
+
+def test_nothing_recorded_is_an_error_and_the_old_file_is_left(tmp_path, capsys):
+    """--overwrite on a port that sends nothing: the previous session's file must not be
+    calibrated as if it were this one's."""
+    out = tmp_path / "rec.csv"
+    _write_log(out, simulate_session(poses=24, hold=1.0, move=0.3, rate=100.0, seed=3))
+    before = out.read_bytes()
+    master, slave = _silent_port()
+    try:
+        rc = main(
+            ["record", "--port", os.ttyname(slave), "--out", str(out), "--overwrite"]
+            + ["--seconds", "0.3", "--columns", "t,ax,ay,az"]
+        )
+    finally:
+        os.close(master)
+        os.close(slave)
+    err = capsys.readouterr().err
+    assert rc != 0 and "nothing was recorded" in err and "left as it was" in err, err
+    assert out.read_bytes() == before and not out.with_suffix(".calib.json").exists()
+
+
+def test_resumed_rows_count_towards_the_coverage(tmp_path):
+    """--resume to add the missing poses: the progress counts the poses already in the log."""
+    out = tmp_path / "rec.csv"
+    _write_log(out, simulate_session(poses=24, hold=1.0, move=0.3, rate=100.0, seed=4))
+    rows = _n_rows(out)
+    master, slave = _silent_port()
+    lines = []
+    try:
+        session = record_session(
+            [os.ttyname(slave)],
+            out,
+            columns="t,ax,ay,az",
+            seconds=0.3,
+            resume=True,
+            echo=lines.append,
+            **DETECT,
+        )
+    finally:
+        os.close(master)
+        os.close(slave)
+    cov = session.devices[0].coverage
+    assert cov.samples == rows and cov.poses >= 20, "\n".join(lines)
+    assert any(f"{rows} rows from before" in m for m in lines)
+    assert _n_rows(out) == rows  # nothing new came, nothing was changed
 
 
 def test_batch_of_marg_logs(tmp_path):
@@ -175,11 +237,7 @@ def test_batch_of_marg_logs(tmp_path):
     paths, truths = [], []
     for k in range(2):
         s = simulate_session(poses=24, hold=1.0, move=0.3, rate=100.0, seed=10 + k)
-        w = LogWriter(tmp_path / f"m{k}.csv")
-        w.open(["t", "ax", "ay", "az", "mx", "my", "mz"])
-        for row in np.column_stack([s["t"], s["acc"], s["mag"]]):
-            w.append(format_row(row))
-        w.close()
+        _write_log(tmp_path / f"m{k}.csv", s, ("t", "ax", "ay", "az", "mx", "my", "mz"))
         paths.append(tmp_path / f"m{k}.csv")
         truths.append(s["truth"])
     res = calibrate_devices(paths, "marg", field=45.0, echo=None, **DETECT)

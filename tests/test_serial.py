@@ -13,12 +13,14 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 import tty
 from pathlib import Path
 
 import numpy as np
 import pytest
+import serial
 
 from calib_jax import AccelCalibration, calibrate_mag
 from calib_jax.io import load_log
@@ -42,6 +44,14 @@ def _wait_for(cond, what: str, proc: subprocess.Popen | None = None, timeout: fl
             raise AssertionError(f"process ended (rc {proc.returncode}) before {what}")
         time.sleep(0.02)
     raise AssertionError(f"timed out waiting for {what}")
+
+
+def _read_until(r: SerialReader, n: int, timeout: float = 10.0) -> None:
+    """Read batches until ``n`` lines were accepted (a bounded wait, never a hang)."""
+    end = time.monotonic() + timeout
+    while r.stats.lines_ok < n:
+        assert time.monotonic() < end, f"{r.stats.lines_ok} of {n} lines: {r.stats.summary()}"
+        r.read_batch()
 
 
 def _stop(proc: subprocess.Popen) -> None:
@@ -113,10 +123,8 @@ def test_loop_url_parses_counts_and_logs(tmp_path):
             b"4 5 6\n"  # whitespace-separated
             b"7;8;9\n"
         )
-        for _ in range(50):
-            r.read_batch()
-            if r.stats.lines_ok >= 3:
-                break
+        _read_until(r, 3)
+        r.read_batch()  # nothing more may come
     assert r.stats.lines_ok == 3
     assert r.stats.header_lines == 1
     want = {"partial": 1, "decode": 1, "too_long": 1, "field_count": 1, "non_numeric": 2}
@@ -181,8 +189,7 @@ def test_resume_appends_and_overwrite_replaces(tmp_path):
     path.write_text("t,ax,ay,az\n1.5,0.1,0.2,0.3\n2.0,0.4,0.5")
     with SerialReader("loop://", log=path, resume=True, columns="ax,ay,az") as r:
         r.port.write(b"\n1,2,3\n4,5,6\n")
-        while r.stats.lines_ok < 2:
-            r.read_batch()
+        _read_until(r, 2)
     text = path.read_text()
     assert text.count("t,ax,ay,az") == 1
     lines = text.splitlines()
@@ -194,8 +201,7 @@ def test_resume_appends_and_overwrite_replaces(tmp_path):
     assert np.isfinite(log.acc).all(axis=1).sum() == 3
     with SerialReader("loop://", log=path, overwrite=True, columns="ax,ay,az") as r:
         r.port.write(b"\n7,8,9\n")
-        while r.stats.lines_ok < 1:
-            r.read_batch()
+        _read_until(r, 1)
     assert path.read_text().splitlines()[1:][0].endswith("7.0,8.0,9.0")
     assert len(path.read_text().splitlines()) == 2
 
@@ -210,6 +216,143 @@ def test_log_writer_flushes_whole_lines(tmp_path):
     assert (tmp_path / "w.csv").read_text().count("\n") == 1 + 3
     w.close()
     assert (tmp_path / "w.csv").read_text().count("\n") == 1 + 5 and w.rows_written == 5
+
+
+def test_trailing_separator_and_a_note_when_nothing_gets_through():
+    """'1,2,3,' (a sketch printing a comma after every field) is a record; a stream of which
+    nothing parses gets one message saying what to change."""
+    msgs = []
+    with SerialReader("loop://", on_message=msgs.append) as r:
+        r.port.write(b"\nax,ay,az,\r\n1,2,3,\r\n4;5;6;\r\n")
+        _read_until(r, 2)
+    assert r.stats.header_lines == 1 and r.stats.dropped_total == 0
+    msgs.clear()
+    with SerialReader("loop://", columns="ax,ay,az", on_message=msgs.append) as r:
+        # what a wrong baud rate looks like: bytes that are not text, now and then a line end
+        r.port.write(b"\n" + b"\xe3\x9f\xa0\xff\x13\n" * 30)
+        r.read_batch()
+    assert r.stats.dropped["decode"] == 30 and r.stats.lines_ok == 0
+    notes = [m for m in msgs if "no line accepted yet" in m]
+    assert len(notes) == 1 and "baud" in notes[0], msgs
+
+
+def test_headerless_layout_waits_for_two_lines_that_agree():
+    """One odd line at power-up must not fix the layout for the whole session."""
+    with SerialReader("loop://", on_message=lambda s: None) as r:
+        r.port.write(b"\n7,8,9\n0.01,1,2,3\n0.02,4,5,6\n0.03,7,8,9\n")
+        _read_until(r, 3)
+    assert r.columns == ["t", "ax", "ay", "az"] and r.stats.dropped["field_count"] == 1
+    with SerialReader("loop://", on_message=lambda s: None) as r:
+        r.port.write(b"\n1,2,3\n")  # one line and no more: never confirmed, counted
+        r.read_batch()
+    assert r.stats.lines_ok == 0 and r.stats.dropped["no_columns"] == 1
+
+
+def test_log_writer_takes_no_rows_after_close(tmp_path):
+    """A late row (a reader thread that outlived its session's close) must not reopen, and
+    so truncate, the log: it is refused."""
+    path = tmp_path / "w.csv"
+    w = LogWriter(path)
+    w.open(["t", "ax", "ay", "az"])
+    w.append(format_row([0, 1, 2, 3]))
+    w.close()
+    before = path.read_text()
+    with pytest.raises(ValueError, match="closed"):
+        w.append(format_row([1, 1, 2, 3]))
+    with pytest.raises(ValueError, match="once"):
+        w.open(["t", "ax", "ay", "az"])
+    assert path.read_text() == before == "t,ax,ay,az\n0.0,1.0,2.0,3.0\n"
+    # a log whose header lost its line end (a crash right at the start) resumes cleanly
+    path.write_text("t,ax,ay,az")
+    w = LogWriter(path, resume=True)
+    w.open(["t", "ax", "ay", "az"])
+    w.append(format_row([0, 1, 2, 3]))
+    w.close()
+    assert path.read_text() == "t,ax,ay,az\n0.0,1.0,2.0,3.0\n"
+
+
+class _FlakyPort:
+    """A port that opens and then fails on the first read (a flaky cable, another program on
+    the port, a server that hangs up at once)."""
+
+    opened = 0
+    in_waiting = 0
+
+    def __init__(self):
+        _FlakyPort.opened += 1
+        assert _FlakyPort.opened < 100, "reopened without backing off"
+
+    def read(self, n):
+        raise serial.SerialException("device reports readiness to read but returned no data")
+
+    def close(self):
+        pass
+
+
+def test_port_that_fails_before_any_data_backs_off_and_gives_up(monkeypatch):
+    """Opening is not enough to end an outage: without data the delays keep doubling, the
+    reader gives up on time, and every batch still ends on time (its loop's stop checks)."""
+    _FlakyPort.opened = 0
+    monkeypatch.setattr(SerialReader, "_open_port", lambda self: _FlakyPort())
+    msgs = []
+    r = SerialReader(
+        "flaky://",
+        columns="ax,ay,az",
+        backoff_initial=0.02,
+        backoff_max=0.08,
+        max_reconnect_seconds=0.5,
+        on_message=msgs.append,
+    )
+    t0 = time.monotonic()
+    with r:
+        batches = list(r)
+    assert r.status == "gave_up" and "max_reconnect_seconds" in r.status_message
+    assert len(batches) >= 3  # the loop got control back while the port kept failing
+    delays = [m.rsplit("retry in ", 1)[1] for m in msgs if "retry in" in m]
+    assert delays[:4] == ["0.02 s", "0.04 s", "0.08 s", "0.08 s"], msgs  # doubling, capped
+    assert _FlakyPort.opened <= 12 and time.monotonic() - t0 < WAIT
+
+
+def test_lost_connection_flushes_what_was_read(tmp_path):
+    """Lines read before an unplug reach the file at once, not when (if ever) the device comes
+    back: the flush cadence is off here, so only the loss can have written them."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    log = tmp_path / "u.csv"
+    r = SerialReader(
+        os.ttyname(slave),
+        log=log,
+        columns="ax,ay,az",
+        flush_interval=1e9,
+        flush_lines=10**9,
+        fsync_interval=1e9,
+        on_message=lambda s: None,
+    )
+    try:
+        with r:
+            os.write(master, b"\n" + b"".join(b"%d,2,3\n" % k for k in range(50)) + b"7,8")
+            _read_until(r, 50)
+            assert _n_rows(log) == 0  # nothing flushed yet
+            os.close(master)  # unplugged, mid-line
+            master = None
+            end = time.monotonic() + 5.0
+            while r.connected and time.monotonic() < end:
+                r.read_batch()
+            assert r.status == "reconnecting" and r.stats.dropped["partial"] == 1
+            assert _n_rows(log) == 50 and r.stats.lines_logged == 50
+    finally:
+        if master is not None:
+            os.close(master)
+        os.close(slave)
+    assert [row[1:] for row in _log_rows(log)[1]] == [[float(k), 2.0, 3.0] for k in range(50)]
+
+
+def test_simulator_flags(monkeypatch):
+    """spawn() turns keyword options into the simulator's own flags (send_t is --no-t)."""
+    monkeypatch.setattr(subprocess, "Popen", lambda cmd, **kw: cmd)
+    cmd = spawn("/tmp/imu", send_t=True, faults=True, header=False, speed=10)
+    assert cmd[3:] == ["--link", "/tmp/imu", "--faults", "--speed", "10"]
+    assert spawn("/tmp/imu", send_t=False)[-1] == "--no-t"
 
 
 def test_unreachable_port_gives_up_with_a_status(tmp_path):
@@ -258,6 +401,56 @@ def test_record_stops_on_ctrl_c_with_the_log_flushed(tmp_path):
     np.testing.assert_array_equal(rec.data.acc, np.array(rows)[:, 1:])
 
 
+def test_record_on_a_real_ctrl_c_logs_each_line_once(tmp_path):
+    """SIGINT lands wherever the reading loop is (parsing, flushing): the log still holds the
+    lines from the first on, each once, in whole rows."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    done = threading.Event()
+
+    def board():  # ~2,000 numbered lines a second until the test is over
+        pending = memoryview(b"\n")
+        k = 0
+        while not done.is_set():
+            if not pending:
+                pending = memoryview(b"".join(b"%d,%d,1\n" % (j, -j) for j in range(k, k + 20)))
+                k += 20
+            try:
+                pending = pending[os.write(master, pending) :]
+            except BlockingIOError:
+                pass  # the reader has stopped reading: wait for the end of the test
+            time.sleep(0.01)
+
+    writer = threading.Thread(target=board, daemon=True)
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+
+    def press_soon(batch):  # armed from inside the loop: the SIGINT can only land in there
+        if not timer.is_alive() and not timer.finished.is_set():
+            timer.start()
+
+    writer.start()
+    try:
+        rec = record(
+            os.ttyname(slave),
+            tmp_path / "c.csv",
+            seconds=WAIT,
+            columns="ax,ay,az",
+            callback=press_soon,
+        )
+    finally:
+        timer.cancel()
+        done.set()
+        writer.join(10)
+        os.close(master)
+        os.close(slave)
+    assert rec.status == "interrupted"
+    header, rows, tail = _log_rows(tmp_path / "c.csv")
+    assert header == ["t", "ax", "ay", "az"] and tail == ""
+    assert 100 <= len(rows) == rec.stats.lines_logged
+    assert [r_[1] for r_ in rows] == list(range(len(rows)))  # from the first, once, in order
+
+
 def test_record_until_seconds_on_a_silent_port(tmp_path):
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -280,6 +473,7 @@ def test_board_with_faults_loses_no_line_and_counts_every_drop(tmp_path, tol):
     )
     msgs = []
     log = tmp_path / "session.csv"
+    end = time.monotonic() + 2 * WAIT
     try:
         with SerialReader(
             str(link),
@@ -294,6 +488,7 @@ def test_board_with_faults_loses_no_line_and_counts_every_drop(tmp_path, tol):
                 # has lost it, every byte it sent has been read
                 if proc.poll() is not None and not r.connected:
                     break
+                assert time.monotonic() < end, f"the board did not finish: {r.stats.summary()}"
         assert proc.wait(WAIT) == 0
     finally:
         _stop(proc)

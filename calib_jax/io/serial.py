@@ -25,18 +25,22 @@ reason in :attr:`SerialReader.stats`):
 * unplug and replug: a read error closes the port and reopens the same URL with exponential
   backoff (``backoff_initial`` doubling up to ``backoff_max``), with a visible message; after
   ``max_reconnect_seconds`` without a connection the reader stops with status ``"gave_up"``.
+  A port that opens but fails again before sending anything (a flaky cable, another program
+  on the port, a server that hangs up) does not end the outage: it keeps backing off and is
+  given up the same way. What was read before the loss is flushed and fsynced at once.
 
 Lines end at ``\\n`` or ``\\r`` (so ``\\r\\n`` works); blank lines are ignored. Fields are
 separated by commas, tabs, semicolons or whitespace (detected per line unless ``delimiter``
-is given). A header line (every field a known column name, see
-:func:`calib_jax.io.canonical_name`) sets the layout when ``columns`` is not given. Without
-a ``t`` column the host's clock (``time.monotonic`` from the session start) stamps the lines,
-spread evenly over the interval in which each read arrived.
+is given); a separator after the last field is allowed. A header line (every field a known
+column name, see :func:`calib_jax.io.canonical_name`) sets the layout when ``columns`` is not
+given. Without a ``t`` column the host's clock (``time.monotonic`` from the session start)
+stamps the lines, spread evenly over the interval in which each read arrived.
 
 Durability: rows are written in whole lines, flushed to the OS every ``flush_interval``
-seconds (or ``flush_lines`` rows), and ``os.fsync``-ed every ``fsync_interval`` seconds and
-on close (also on Ctrl-C inside ``with``). A killed process leaves every line up to the last
-flush intact. An existing log is never truncated unless ``overwrite=True``; ``resume=True``
+seconds (or ``flush_lines`` rows), and ``os.fsync``-ed every ``fsync_interval`` seconds, when
+the connection is lost, and on close (also on Ctrl-C inside ``with``). A killed process leaves
+every line up to the last flush intact; a line cut off by the end of the session is counted
+as ``partial``. An existing log is never truncated unless ``overwrite=True``; ``resume=True``
 appends to it after checking that its header matches.
 
 By default pyserial's flush of the OS input buffer on open is skipped (``keep_pending``):
@@ -49,6 +53,7 @@ import logging
 import math
 import os
 import re
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -83,6 +88,7 @@ _GROUPS = {
     "mag": ("mx", "my", "mz"),
 }
 _SENSOR_COLS = ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz")
+_DROP_NOTE_AFTER = 20  # dropped lines, none accepted: say what to change
 
 logger = logging.getLogger(__name__)
 
@@ -302,7 +308,9 @@ class LogWriter:
 
     The file is opened when :meth:`open` is called with its columns. Creating a writer for a
     path that exists raises unless ``resume`` (append after checking the header) or
-    ``overwrite`` (start afresh) is given.
+    ``overwrite`` (start afresh) is given. A writer opens its file once: after :meth:`close`
+    it refuses rows instead of opening (and truncating) the file again. Its methods may be
+    called from several threads (a reader thread appends while another closes).
     """
 
     def __init__(
@@ -328,13 +336,16 @@ class LogWriter:
         self.last_t: float | None = None
         """Largest time in the file before this session (resume), or None."""
         self._header: list[str] | None = None
+        self._ends_mid_line = self._header_unended = False
         self._file = None
+        self._closed = False
+        self._lock = threading.RLock()
         self._pending: list[str] = []
         self._last_flush = self._last_fsync = time.monotonic()
         self.rows_written = 0
-        exists = self.path.exists() and self.path.stat().st_size > 0
-        if self.path.exists() and not exists and not self.path.is_file():
+        if self.path.exists() and not self.path.is_file():
             raise ValueError(f"{self.path} is not a regular file; choose a file path for the log")
+        exists = self.path.exists() and self.path.stat().st_size > 0
         if exists and not (resume or overwrite):
             raise ValueError(
                 f"{self.path} already exists; pass resume=True (--resume) to append to it, "
@@ -349,7 +360,8 @@ class LogWriter:
         text = data.decode("utf-8", errors="replace")
         lines = [ln for ln in text.split("\n") if ln.strip()]
         self._header = _split_csv(lines[0]) if lines else None
-        self._ends_mid_line = not data.endswith(b"\n")
+        self._ends_mid_line = bool(lines) and not data.endswith(b"\n")
+        self._header_unended = self._ends_mid_line and b"\n" not in data.strip()
         complete = lines[1:-1] if self._ends_mid_line else lines[1:]
         self.existing_rows = len(complete)
         if self._header and "t" in self._header:
@@ -374,68 +386,110 @@ class LogWriter:
     def open(self, columns: Sequence[str]) -> None:
         """Open the file for ``columns`` (canonical names), writing the header if new."""
         columns = list(columns)
-        self.check(columns)
-        self.columns = columns
-        if self._header is not None:  # resume into a non-empty file
-            self._file = open(self.path, "a", encoding="utf-8", newline="")  # noqa: SIM115
-            if self._ends_mid_line:
-                # the previous session died mid-line: end the fragment so that no reader
-                # takes it for a row (an extra non-numeric field: skipped or NaN, never data)
-                self._file.write(",incomplete\n")
-        else:
-            # "x" refuses to clobber a file created since the check; an empty file is reused
-            mode = "w" if (self.overwrite or self.resume or self.path.exists()) else "x"
-            self._file = open(self.path, mode, encoding="utf-8", newline="")  # noqa: SIM115
-            self._file.write(",".join(columns) + "\n")
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._last_flush = self._last_fsync = time.monotonic()
+        with self._lock:
+            if self._file is not None or self._closed:
+                raise ValueError(
+                    f"{self.path} was already opened by this writer; a writer opens its file "
+                    "once (to add to it later, make a new one with resume=True)"
+                )
+            self.check(columns)
+            self.columns = columns
+            if self._header is not None:  # resume into a non-empty file
+                self._file = open(self.path, "a", encoding="utf-8", newline="")  # noqa: SIM115
+                if self._ends_mid_line:
+                    # the previous session died mid-line: end the fragment so that no reader
+                    # takes it for a row (an extra non-numeric field: skipped or NaN, never
+                    # data); a header that only lacks its line end just gets it
+                    self._file.write("\n" if self._header_unended else ",incomplete\n")
+            else:
+                # "x" refuses to clobber a file created since the check; an empty file is reused
+                created = not self.path.exists()
+                mode = "w" if (self.overwrite or self.resume or not created) else "x"
+                self._file = open(self.path, mode, encoding="utf-8", newline="")  # noqa: SIM115
+                self._file.write(",".join(columns) + "\n")
+                if created:
+                    _fsync_dir(self.path.parent)  # the new name survives a crash too
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._last_flush = self._last_fsync = time.monotonic()
 
     @property
     def is_open(self) -> bool:
         return self._file is not None
 
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run (the writer takes no more rows)."""
+        return self._closed
+
     def append(self, line: str) -> None:
         """Queue one row (no newline); it reaches the file at the next flush."""
-        self._pending.append(line)
+        with self._lock:
+            if self._file is None:
+                raise ValueError(
+                    f"the log {self.path} is "
+                    + ("closed; this row was not written" if self._closed else "not open yet")
+                )
+            self._pending.append(line)
 
     def maybe_flush(self, now: float | None = None) -> None:
         """Flush when ``flush_interval`` has passed or ``flush_lines`` rows wait; fsync when
         ``fsync_interval`` has passed."""
-        if self._file is None:
-            return
-        now = time.monotonic() if now is None else now
-        if self._pending and (
-            now - self._last_flush >= self.flush_interval or len(self._pending) >= self.flush_lines
-        ):
-            self.flush()
-        if now - self._last_fsync >= self.fsync_interval:
-            os.fsync(self._file.fileno())
-            self._last_fsync = now
+        with self._lock:
+            if self._file is None:
+                return
+            now = time.monotonic() if now is None else now
+            if self._pending and (
+                now - self._last_flush >= self.flush_interval
+                or len(self._pending) >= self.flush_lines
+            ):
+                self.flush()
+            if now - self._last_fsync >= self.fsync_interval:
+                os.fsync(self._file.fileno())
+                self._last_fsync = now
 
     def flush(self, fsync: bool = False) -> None:
         """Write the queued rows in one call, flush to the OS, and optionally fsync."""
-        if self._file is None:
-            return
-        if self._pending:
-            self._file.write("\n".join(self._pending) + "\n")
-            self.rows_written += len(self._pending)
-            self._pending.clear()
-        self._file.flush()
-        self._last_flush = time.monotonic()
-        if fsync:
-            os.fsync(self._file.fileno())
-            self._last_fsync = self._last_flush
+        with self._lock:
+            if self._file is None:
+                return
+            if self._pending:
+                # take the rows off the queue before writing them: an exception (Ctrl-C)
+                # between the two can end the log early, but never write a row twice
+                rows, self._pending = self._pending, []
+                self._file.write("\n".join(rows) + "\n")
+                self.rows_written += len(rows)
+            self._file.flush()
+            self._last_flush = time.monotonic()
+            if fsync:
+                os.fsync(self._file.fileno())
+                self._last_fsync = self._last_flush
 
     def close(self) -> None:
         """Flush, fsync and close (idempotent)."""
-        if self._file is None:
-            return
-        try:
-            self.flush(fsync=True)
-        finally:
-            self._file.close()
-            self._file = None
+        with self._lock:
+            self._closed = True
+            if self._file is None:
+                return
+            try:
+                self.flush(fsync=True)
+            finally:
+                self._file.close()
+                self._file = None
+
+
+def _fsync_dir(folder: Path) -> None:
+    """fsync a folder so that a file just created in it is there after a crash (POSIX)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # not supported for folders here (e.g. Windows): nothing more to do
+    finally:
+        os.close(fd)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -461,7 +515,7 @@ class SerialReader:
         Field order, canonical names (``"t,ax,ay,az,mx,my,mz,temp"``, ``_`` skips a field), or
         renames for the device's header (``"ax=AccX,ay=AccY,az=AccZ"``). Default: from the
         device's header line; a headerless 3- or 4-field stream is read as ``ax,ay,az`` or
-        ``t,ax,ay,az`` (as :func:`calib_jax.io.load_log` does).
+        ``t,ax,ay,az`` (as :func:`calib_jax.io.load_log` does) once two lines in a row agree.
     scale : float, str or dict, optional
         Raw value times scale = value in units, see :func:`parse_scale`.
     delimiter : str, optional
@@ -586,11 +640,16 @@ class SerialReader:
         self._header_note_done = False
         self._no_columns_note = False
         self._mismatch_note = False
+        self._drop_note = False
+        self._held: tuple[list[float], float, str] | None = None  # a line awaiting the layout
         self._ever_connected = False
         self._down_since: float | None = time.monotonic()
         self._next_attempt = 0.0
         self._backoff = self.backoff_initial
         self._outage_noted = False
+        self._outage_start: float | None = None
+        self._conn_data = False
+        self._connected_at = -math.inf
         self._last_data = time.monotonic()
         self._in_stall = False
         self._last_chunk = None
@@ -628,6 +687,13 @@ class SerialReader:
 
     def close(self) -> None:
         """Flush and fsync the log, close the port (idempotent)."""
+        if self._buf.strip() and not self._skip_long:
+            self._drop("partial", bytes(self._buf))  # a line the end of the session cut off
+        if self._held is not None:  # the only line of a headerless stream: never confirmed
+            self._drop("no_columns", self._held[2])
+            self._held = None
+        self._buf.clear()
+        self._skip_long = False
         try:
             if self._writer is not None:
                 self._writer.close()
@@ -726,19 +792,18 @@ class SerialReader:
         try:
             self.port = self._open_port()
         except (serial.SerialException, OSError, ValueError) as exc:
-            down = now - (self._down_since or now)
-            if self.max_reconnect_seconds is not None and down >= self.max_reconnect_seconds:
-                self.status = "gave_up"
-                self.status_message = (
-                    f"no connection for {down:.1f} s (max_reconnect_seconds="
-                    f"{self.max_reconnect_seconds}); last error: {exc}"
-                )
-                self._say(f"giving up: {self.status_message}")
+            if self._give_up(now, exc):
                 return False
             if not self._outage_noted:
                 self._outage_noted = True
+                check = (
+                    ""
+                    if self._ever_connected
+                    else "check the port name (--port) and that the device is plugged in; "
+                )
                 self._say(
-                    f"cannot open ({exc}); retrying with backoff up to {self.backoff_max:g} s"
+                    f"cannot open ({exc}); {check}retrying with backoff up to "
+                    f"{self.backoff_max:g} s"
                     + (
                         f" for {self.max_reconnect_seconds:g} s"
                         if self.max_reconnect_seconds is not None
@@ -757,9 +822,12 @@ class SerialReader:
         self._ever_connected = True
         self.status = "connected"
         self.status_message = ""
-        self._down_since = None
-        self._backoff = self.backoff_initial
-        self._outage_noted = False
+        # the outage ends, and the backoff starts afresh, once data arrives: a port that opens
+        # and fails before sending anything (a flaky cable, another program on the port, a
+        # server that hangs up) goes on backing off and is given up like one that won't open
+        self._outage_start, self._down_since = self._down_since, None
+        self._conn_data = False
+        self._connected_at = now
         self._buf.clear()
         self._skip_long = False
         self._first_segment = True
@@ -770,20 +838,48 @@ class SerialReader:
 
     def _lost(self, exc: BaseException, now: float) -> None:
         self._close_port()
-        if self._buf and not self._skip_long:
-            self.stats.dropped["partial"] += 1
+        if self._buf.strip() and not self._skip_long:
+            self._drop("partial", bytes(self._buf))
         self._buf.clear()
         self._skip_long = False
+        if self._writer is not None:
+            # everything read so far goes to disk now: an outage may last minutes, and the
+            # read loop (which flushes on its cadence) only turns again once reconnected
+            self._writer.flush(fsync=True)
+            self.stats.lines_logged = self._writer.rows_written
         if not self.reconnect:
             self.status = "disconnected"
             self.status_message = f"connection lost: {exc}"
             self._say(self.status_message)
             return
         self.status = "reconnecting"
-        self._down_since = now
-        self._next_attempt = now
-        self._backoff = self.backoff_initial
-        self._say(f"connection lost ({exc}); reconnecting")
+        if self._conn_data or now - self._connected_at >= self.backoff_max:
+            # a connection that worked (data, or it lasted): a new outage, retried at once
+            self._down_since = now
+            self._next_attempt = now
+            self._backoff = self.backoff_initial
+            self._say(f"connection lost ({exc}); reconnecting")
+            return
+        # it opened but failed before any data: the same outage goes on, backing off
+        self._down_since = self._outage_start if self._outage_start is not None else now
+        if self._give_up(now, exc):
+            return
+        self._next_attempt = now + self._backoff
+        self._say(f"connection lost again before any data ({exc}); retry in {self._backoff:g} s")
+        self._backoff = min(2.0 * self._backoff, self.backoff_max)
+
+    def _give_up(self, now: float, exc: BaseException) -> bool:
+        """Give up (status ``gave_up``) when the outage has lasted ``max_reconnect_seconds``."""
+        down = now - (self._down_since or now)
+        if self.max_reconnect_seconds is None or down < self.max_reconnect_seconds:
+            return False
+        self.status = "gave_up"
+        self.status_message = (
+            f"no connection for {down:.1f} s (max_reconnect_seconds="
+            f"{self.max_reconnect_seconds}); last error: {exc}"
+        )
+        self._say(f"giving up: {self.status_message}")
+        return True
 
     def _read_chunk(self) -> bytes:
         port = self.port
@@ -794,14 +890,40 @@ class SerialReader:
         return bytes(port.read(max(1, min(int(n), 1 << 16))))
 
     # ---- parsing ---------------------------------------------------------------------------
-    def _drop(self, reason: str) -> None:
+    def _drop(self, reason: str, raw: bytes | str = b"") -> None:
         self.stats.dropped[reason] += 1
+        if self.stats.lines_ok or self._drop_note or reason == "partial":
+            return
+        if sum(v for k, v in self.stats.dropped.items() if k != "partial") < _DROP_NOTE_AFTER:
+            return
+        self._drop_note = True
+        counts = {k: v for k, v in self.stats.dropped.items() if v and k != "partial"}
+        worst = max(counts, key=counts.get)
+        example = raw if isinstance(raw, str) else raw[:60]
+        fix = {
+            "decode": "bytes that are not text usually mean the wrong baud rate "
+            "(baudrate=, --baud)",
+            "too_long": "lines this long usually mean the wrong baud rate (baudrate=, --baud)",
+            "field_count": "the lines have another number of fields than columns= (--columns) "
+            "names; fix it ('_' skips a field)",
+            "non_numeric": "fields that are not numbers: check delimiter= (--delimiter) and "
+            "columns= (--columns; '_' skips a text field)",
+            "no_columns": "say what the fields are with columns= (--columns)",
+            "header_mismatch": "the device's header contradicts columns= (--columns); fix it",
+        }[worst]
+        drops = ", ".join(f"{k} {v}" for k, v in counts.items())
+        self._say(f"no line accepted yet, {drops} dropped (e.g. {example!r}); {fix}")
 
     def _split(self, text: str) -> list[str]:
         d = self._delim
         if d == "auto":
             d = "\t" if "\t" in text else "," if "," in text else ";" if ";" in text else None
-        return text.split() if d is None else [f.strip() for f in text.split(d)]
+        if d is None:
+            return text.split()
+        fields = [f.strip() for f in text.split(d)]
+        if len(fields) > 1 and not fields[-1]:
+            fields.pop()  # a separator after the last field, as many sketches print
+        return fields
 
     def _feed(self, data: bytes, now: float) -> None:
         self.stats.bytes += len(data)
@@ -823,7 +945,7 @@ class SerialReader:
             self._line(raw, first, t_host)
         if len(self._buf) > self.max_line_bytes:
             if not self._skip_long:
-                self._drop("too_long")
+                self._drop("too_long", bytes(self._buf[:60]))
             self._skip_long = True
             self._first_segment = False
             self._buf.clear()
@@ -832,12 +954,12 @@ class SerialReader:
         if not raw.strip():
             return
         if len(raw) > self.max_line_bytes:
-            self._drop("too_long")
+            self._drop("too_long", raw[:60])
             return
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError:
-            self._drop("partial" if first else "decode")
+            self._drop("partial" if first else "decode", raw)
             return
         fields = self._split(text.strip())
         values = []
@@ -853,7 +975,7 @@ class SerialReader:
             if head is not None:
                 self._header(head)
                 return
-            self._drop("partial" if first else "non_numeric")
+            self._drop("partial" if first else "non_numeric", text)
             return
         if first:  # the port opened in the middle of this line
             self._drop("partial")
@@ -861,7 +983,7 @@ class SerialReader:
         if self._layout is None:
             guess = {3: ["ax", "ay", "az"], 4: ["t", "ax", "ay", "az"]}.get(len(values))
             if guess is None:
-                self._drop("no_columns")
+                self._drop("no_columns", text)
                 if not self._no_columns_note:
                     self._no_columns_note = True
                     self._say(
@@ -869,14 +991,27 @@ class SerialReader:
                         "are with columns=, e.g. columns='t,ax,ay,az,mx,my,mz'"
                     )
                 return
+            # a guess waits for a second line of the same width (as load_log's does): one odd
+            # line at power-up must not fix the layout of the whole session
+            held, self._held = self._held, (values, t_host, text)
+            if held is None or len(held[0]) != len(values):
+                if held is not None:
+                    self._drop("field_count", held[2])
+                return
+            self._held = None
             self._say(
                 f"no header and no columns: reading {len(values)} fields as {','.join(guess)}",
                 logging.INFO,
             )
             self._set_layout(guess)
+            self._accept(held[0], held[1])
         if len(values) != len(self._layout):
-            self._drop("field_count")
+            self._drop("field_count", text)
             return
+        self._accept(values, t_host)
+
+    def _accept(self, values: list[float], t_host: float) -> None:
+        """A well-formed line: scale it into a log row, log it, keep it for the batch."""
         row = [0.0] * len(self._log_cols)
         for i, j, s in self._plan:
             row[j] = values[i] * s if s != 1.0 else values[i]
@@ -884,24 +1019,29 @@ class SerialReader:
             t = max(t_host, self._last_t)
             self._last_t = t
             row[self._t_index] = round(t, 6)
-        self.stats.lines_ok += 1
-        self._rows.append(tuple(row))
-        if self._writer is not None:
-            if not self._writer.is_open:
+        if self._writer is not None:  # the log first: a row counted ok is a row logged
+            if not (self._writer.is_open or self._writer.closed):
                 self._open_log()
             self._writer.append(format_row(row))
+        self.stats.lines_ok += 1
+        self._rows.append(tuple(row))
 
     def _header(self, head: list[str | None]) -> None:
         if self._layout is None:
             self._say(f"header from the device: {','.join(c or '_' for c in head)}", logging.INFO)
             self._set_layout(head)
             self.stats.header_lines += 1
+            held, self._held = self._held, None  # a line that waited for the layout
+            if held is not None and len(held[0]) == len(head):
+                self._accept(held[0], held[1])
+            elif held is not None:
+                self._drop("field_count", held[2])
         elif len(head) == len(self._layout) and all(
             c is None or c == h for c, h in zip(self._layout, head, strict=True)
         ):  # the same layout (a field the layout skips may have any name)
             self.stats.header_lines += 1
         else:
-            self._drop("header_mismatch")
+            self._drop("header_mismatch", ",".join(c or "_" for c in head))
             if not self._mismatch_note:
                 self._mismatch_note = True
                 self._say(
@@ -933,9 +1073,15 @@ class SerialReader:
                 data = self._read_chunk()
             except (serial.SerialException, OSError) as exc:
                 self._lost(exc, time.monotonic())
+                if time.monotonic() >= deadline:  # a batch ends on time, whatever the port does
+                    break
                 continue
             now = time.monotonic()
             if data:
+                if not self._conn_data:  # this connection works: the outage is over
+                    self._conn_data = True
+                    self._backoff = self.backoff_initial
+                    self._outage_noted = False
                 if now - self._last_data > self.stall_seconds and not self._in_stall:
                     self._stall(now)
                 self._in_stall = False

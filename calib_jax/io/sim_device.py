@@ -386,12 +386,11 @@ def spawn(link: str | Path, truth: str | Path | None = None, **options) -> subpr
         cmd += ["--truth", str(truth)]
     for k, v in options.items():
         flag = "--" + k.replace("_", "-")
-        if v is True:
+        if k == "send_t":  # the flag is --no-t; sending t is the default
+            cmd += [] if v else ["--no-t"]
+        elif v is True:
             cmd.append(flag)
-        elif v is False:
-            if k == "send_t":
-                cmd.append("--no-t")
-        elif v is not None:
+        elif v is not None and v is not False:
             cmd += [flag, str(v)]
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
 
