@@ -191,14 +191,20 @@ def test_ckexplorer_scale_asymmetry(tmp_path):
     ]
 
 
-def test_qmc_filtered_hard_iron_drift_and_noisy_null():
-    """QMC5883L: the filtered log's centre drifts (hard_iron_drift accepted); on the noisy log
-    the polynomial terms that BIC alone would take are rejected (null test, split halves or
-    plausibility) and nothing is added."""
+def test_qmc_filtered_time_structure_and_noisy_null():
+    """QMC5883L. Filtered log: the issue's analysis saw a hard-iron drift of 1.7-2.7 % of the
+    field over 455 s. Here a linear centre drift passes BIC (gain ~124), leave-one-out, the
+    null test and plausibility, but its coefficients differ between the two halves (z ~ 3.0,
+    at the limit; quadratic in time: z ~ 5.5), and the residual keeps a time structure of
+    about 1.2 % of the field (p ~ 1e-130): the loop reports that structure as unexplained
+    instead of a confident drift. Noisy log: the polynomial terms that BIC alone would take are
+    rejected (null test, split halves or plausibility) and nothing is added."""
     filt = diagnose_mag(load_log(qmc_log_path("filtered")))
-    assert "hard_iron_drift" in filt.effects
-    drift = np.asarray(filt.steps[-1]["coefficients"]["drift1"]["value"])
-    assert 0.005 < np.linalg.norm(drift) < 0.05  # a percent-level move of the centre
+    drift = [e for e in filt.rounds[0] if e["effect"] == "hard_iron_drift"][0]
+    assert drift["tests"]["bic"] and drift["tests"]["null"] and drift["tests"]["loo"]
+    assert filt.unexplained_structure
+    time_ = [s for s in filt.structure if s["driver"] == "time"][0]
+    assert time_["above_floor"] and 0.005 < time_["size"] < 0.03
     noisy = diagnose_mag(load_log(qmc_log_path("noisy")))
     assert "scale_nonlinearity" not in noisy.effects
     assert "hard_iron_drift" not in noisy.effects

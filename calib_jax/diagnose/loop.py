@@ -328,6 +328,10 @@ class Diagnosis:
 
     def summary(self) -> str:
         u, f = {"accel": (" mg", 1e3), "mag": (" %", 1e2)}.get(self.sensor, (" deg", 180 / math.pi))
+        if self.verdict == "not_possible":
+            return f"diagnosis ({self.sensor}): not possible\n  note: " + "\n  note: ".join(
+                self.notes
+            )
         lines = [f"diagnosis ({self.sensor}, {self.n_observations} {self.observations}):"]
         for s in self.steps:
             lines.append(
@@ -395,7 +399,8 @@ def _coefficients(effect, theta, se) -> dict:
 
 
 def _plausible(effect, theta_new, theta_cur, free_new) -> tuple[bool, str]:
-    idx = _indices(_slots(effect, 2)) if effect != "soft_iron" else np.array([], int)
+    special = ("soft_iron", "outliers")
+    idx = _indices(_slots(effect, 2)) if effect not in special else np.array([], int)
     idx = idx[free_new[idx]] if idx.size else idx
     size = float(np.max(np.abs(theta_new[idx]))) if idx.size else 0.0
     lim = BOUNDS["nonlinear"] if effect == "scale_nonlinearity" else BOUNDS["effect"]
@@ -479,10 +484,23 @@ def _run(
                     }
                 )
                 break
-            w = np.where(np.arange(m) == worst, 0.0, w)
+            w_try = np.where(np.arange(m) == worst, 0.0, w)
+            P.add(cur["theta"], w_try, free)
+            fit = P.run()[0]
+            ok_plaus, why = _plausible("outliers", fit["theta"], cur["theta"], free)
+            if not (fit["converged"] and ok_plaus):
+                log.append(
+                    {
+                        "effect": "outliers",
+                        "accepted": False,
+                        "reason": f"the refit without observation {worst} "
+                        + ("did not converge" if not fit["converged"] else why)
+                        + ": the data, not one observation, disagree with the model",
+                    }
+                )
+                break
+            w, cur = w_try, fit
             newly.append(worst)
-            P.add(cur["theta"], w, free)
-            cur = P.run()[0]
         if newly:
             rejected += newly
             log.insert(0, {"effect": "outliers", "accepted": True, "rejected": newly})
@@ -976,6 +994,15 @@ def diagnose_mag(
             "mag", len(keep), f"{MIN_OBSERVATIONS} samples", "too few samples", source
         )
     cal = calibrate_mag(x[ok], model=model)
+    if cal.status in ("failed", "not_converged"):
+        return _not_possible(
+            "mag",
+            len(keep),
+            "a converged ellipsoid fit",
+            f"the declared model's fit is '{cal.status}' ({cal.solver_message}); record more "
+            "orientations",
+            source,
+        )
     W, c, R = np.asarray(cal.soft_iron), np.asarray(cal.center), float(cal.radius)
     k0 = R / np.cbrt(np.linalg.det(W))
     alpha_n = np.linalg.inv(W * k0 / R)

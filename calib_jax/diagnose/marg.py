@@ -189,6 +189,17 @@ def diagnose_marg(
     ok = np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
     ca = calibrate_mag(acc[ok], sensor="accel", field=1.0, model="full")
     cm = calibrate_mag(mag[ok], model="full")
+    for name, c in (("accelerometer", ca), ("magnetometer", cm)):
+        if c.status in ("failed", "not_converged"):
+            return _not_possible(
+                "marg",
+                int(ok.sum()),
+                "a converged ellipsoid for each sensor",
+                f"the {name} ellipsoid fit is '{c.status}' ({c.solver_message}); the angle "
+                "between miscalibrated vectors says nothing about alignment or timing. Record "
+                "more orientations (both hemispheres)",
+                source,
+            )
     A = (acc - ca.center) @ np.asarray(ca.soft_iron).T
     Mg = (mag - cm.center) @ np.asarray(cm.soft_iron).T
     # the full-rate series (finite rows) for interpolation

@@ -8,7 +8,9 @@ way; 0 without a temperature column). The calibrated vector and the residual are
     b(tau, T) = b + d1 tau + d2 tau^2 + c1 T + c2 T^2              bias / hard iron
     y         = alpha^-1 (x_n - b(tau, T)) / (1 + k1 T)             paper 1 eq. 1, gains(T)
     y_j      <- y_j - q_j y_j^2 - r_j y_j^3                          per-axis nonlinearity
-    e         = |y| - 1                                             relative magnitude error
+    e         = det(alpha)^(1/3) (|y| - 1)                          fitted (see residual)
+
+and |y| - 1, the relative magnitude error, is what the diagnosis reports.
 
 with alpha symmetric (gains on the diagonal, paper 1's non-orthogonality off it). All 30
 parameters live in one vector ``theta`` (layout in :data:`SLOTS`); which ones a fit frees is a
@@ -81,11 +83,29 @@ def calibrated(theta, free, x, tau, temp):
     return y - th[24:27] * y**2 - th[27:30] * y**3
 
 
+def radius(theta, free):
+    """det(alpha)^(1/3): the radius of the fitted sphere in normalised units (about 1)."""
+    g = jnp.where(free[0:3], theta[0:3], theta[0])
+    s = jnp.where(free[3:6], theta[3:6], 0.0)
+    det = (
+        g[0] * (g[1] * g[2] - s[2] ** 2)
+        - s[0] * (s[0] * g[2] - s[2] * s[1])
+        + s[1] * (s[0] * s[2] - g[1] * s[1])
+    )
+    return jnp.cbrt(det)
+
+
 def residual(theta, data):
-    """Data rows |y_i| - 1 (weighted by sqrt(w) outside), then 30 pinning rows."""
+    """Data rows r (|y_i| - 1) with r = det(alpha)^(1/3), then 30 pinning rows.
+
+    The factor r makes the residual a distance in the data's units, not a fraction of the
+    fitted radius: relative errors let a far-away, huge sphere fit a cap of the data with a
+    small relative error (a magnetometer with a magnet attached, BROAD trial 34, ran away to
+    0.03 % that way; the same runaway calib_jax.models.mag guards against).
+    """
     x, tau, temp, w, free = data
     y = jax.vmap(calibrated, in_axes=(None, None, 0, 0, 0))(theta, free, x, tau, temp)
-    e = jnp.sqrt(jnp.sum(y * y, axis=1)) - 1.0
+    e = radius(theta, free) * (jnp.sqrt(jnp.sum(y * y, axis=1)) - 1.0)
     pin = jnp.where(free, 0.0, theta)
     return jnp.concatenate([e, pin])
 
@@ -105,8 +125,9 @@ def _fit_one(theta0, x, tau, temp, w, free, max_iter):
         max_iter=max_iter,
         covariance_method="cholesky",
     )
-    e = residual(res.params, data)[:m]
-    J = jax.jacfwd(residual)(res.params, data)[:m]
+    r = radius(res.params, free)
+    e = residual(res.params, data)[:m] / r  # |y| - 1, the relative error reported
+    J = jax.jacfwd(residual)(res.params, data)[:m] / r
     return res.params, res.stderr, res.status, e, J
 
 
@@ -118,8 +139,9 @@ def _compiled_fit(max_iter: int):
 def fit_many(theta0, x, tau, temp, w, free, max_iter: int = 100):
     """Fit a stack of problems (leading axis) in one vmapped call.
 
-    Returns numpy arrays: params (P, 30), stderr (P, 30), status (P,), residuals e (P, m) of
-    the data rows, and the data rows' Jacobian J (P, m, 30) at the solution.
+    Returns numpy arrays: params (P, 30), stderr (P, 30), status (P,), the relative errors
+    e = |y| - 1 (P, m) of the data rows, and their Jacobian J (P, m, 30) at the solution (the
+    fitted residual divided by the fitted radius, about 1).
     """
     out = _compiled_fit(int(max_iter))(*(jnp.asarray(a) for a in (theta0, x, tau, temp, w, free)))
     return tuple(np.asarray(o) for o in out)
