@@ -30,9 +30,10 @@ class Status(enum.IntEnum):
     """An external solver reported a failure other than the budget."""
     CONVERGED_ROUNDOFF = 8
     """A step was rejected because neither the actual nor the predicted change of chi2 rose
-    above round-off (4 sqrt(m) eps chi2): the fit is at the optimum to machine precision, though the
-    absolute tests 1-3 did not trigger (typical with many samples, where the gradient at the
-    optimum is dominated by round-off)."""
+    above round-off (4 eps (sqrt(m) chi2 + 2 sum w|e|s), s the size of the terms each
+    residual is computed from; see calib_jax.lm.gavin): the fit is at the optimum to machine
+    precision, though the absolute tests 1-3 did not trigger (typical with many samples,
+    where the gradient at the optimum is dominated by round-off)."""
     INSUFFICIENT_DATA = 9
     """Batch fits: too few valid samples for the model (checked inside jit; nothing fitted)."""
     NO_COVERAGE = 10
