@@ -574,8 +574,6 @@ def _run(
                 best = (c, dbic, fit, d["free"])
         rounds.append(log)
         if best is None:
-            if newly:
-                continue  # re-test for outliers against the cleaned fit
             break
         c, _, fit, fc = best
         cur, free = fit, fc
