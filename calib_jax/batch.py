@@ -122,6 +122,10 @@ def _batch_moments(raw, valid):
 
     def one(args):
         r, v = args
+        # non-finite samples are masked out here, inside the one pass over the data (an eager
+        # isfinite + where before the call read and wrote all of it twice more)
+        v = v & jnp.all(jnp.isfinite(r), axis=-1)
+        r = jnp.where(v[:, None], r, 0.0)  # NaN never enters the arithmetic
         mean, k = _normalise(r, v)
         return moments((r - mean) / k, v.astype(r.dtype)), mean, k
 
@@ -237,7 +241,7 @@ def _compiled(kind: str, model: str, solver: str, options: tuple, shard: bool):
             rms=jnp.where(bad, nan, rms),
             chi2=jnp.where(bad, nan, res.chi2),
             iterations=res.iterations,
-            n_samples=jnp.sum(valid, axis=1),
+            n_samples=jnp.round(S[:, 9, 9]).astype(jnp.int_),  # the count of valid samples
         )
 
     if shard:
@@ -273,8 +277,7 @@ def _prepare(raw, mask, shard):
     mask = jnp.asarray(mask, bool)
     if mask.shape != raw.shape[:2]:
         raise ValueError(f"mask must be (sensors, samples) = {raw.shape[:2]}, got {mask.shape}")
-    valid = mask & jnp.all(jnp.isfinite(raw), axis=-1)
-    raw = jnp.where(valid[..., None], raw, 0.0)  # NaN never enters the arithmetic
+    valid = mask  # non-finite samples are masked inside the jitted moment pass
     n = raw.shape[0]
     size = sensor_bucket(n, len(jax.devices()) if shard else 1)
     if size > n:  # padding sensors: all samples masked out (INSUFFICIENT_DATA, sliced off)
