@@ -20,6 +20,7 @@ from .align import align_mag_to_accel, plane_alignment
 from .attitude import estimate_attitude, gauss_newton_quaternion
 from .calibration import AccelCalibration, MagCalibration
 from .datasets import broad_excerpt_path, demo_log_path, load_broad_excerpt, mag_demo_log_path
+from .implicit import solve_implicit
 from .io import SensorLog, load_log
 from .lm import LMResult, Status, lm_solve, optx_solve
 from .mag import calibrate_mag, fit_ellipsoid_normalized
@@ -30,6 +31,7 @@ from .static import StaticReport, detect_static
 __version__ = "0.1.0"
 
 __all__ = [
+    "solve_implicit",
     "MagCalibration",
     "align_mag_to_accel",
     "broad_excerpt_path",

@@ -38,31 +38,43 @@ OUT = ROOT / "diagnosis"
 
 def logs():
     """(name, description, thunk) for every real log."""
-    yield "xsens", "imu_tk Xsens accel, 38 poses", lambda: diagnose_accel(
-        load_log(demo_log_path(), columns="t,ax,ay,az")
+    yield (
+        "xsens",
+        "imu_tk Xsens accel, 38 poses",
+        lambda: diagnose_accel(load_log(demo_log_path(), columns="t,ax,ay,az")),
     )
-    yield "ck_accel", "CK-Explorer accel, 160 x 100-sample poses", lambda: diagnose_accel(
-        load_log(accel_tumble_log_path()), block=100
+    yield (
+        "ck_accel",
+        "CK-Explorer accel, 160 x 100-sample poses",
+        lambda: diagnose_accel(load_log(accel_tumble_log_path()), block=100),
     )
     ck = load_log(mag_demo_log_path())
     yield "ck_mag", "CK-Explorer magnetometer tumble", lambda: diagnose_mag(ck)
     yield "ck_marg", "CK-Explorer accel + mag tumble", lambda: diagnose_marg(ck.acc, ck.mag)
     for which in ("filtered", "noisy"):
-        yield f"qmc_{which}", f"QMC5883L {which}, 455 s", lambda w=which: diagnose_mag(
-            load_log(qmc_log_path(w))
+        yield (
+            f"qmc_{which}",
+            f"QMC5883L {which}, 455 s",
+            lambda w=which: diagnose_mag(load_log(qmc_log_path(w))),
         )
     imucal = SHARED / "imucal_ferraris" / "annotated_session.csv"
     if imucal.exists():
-        yield "imucal", "imucal Ferraris session (6 faces + rotations)", lambda: diagnose_accel(
-            load_log(imucal, columns={"ax": "acc_x", "ay": "acc_y", "az": "acc_z"}),
-            sample_rate=102.4,
+        yield (
+            "imucal",
+            "imucal Ferraris session (6 faces + rotations)",
+            lambda: diagnose_accel(
+                load_log(imucal, columns={"ax": "acc_x", "ay": "acc_y", "az": "acc_z"}),
+                sample_rate=102.4,
+            ),
         )
     xio = SHARED / "xio_fusion_sensor_data" / "sensor_data.csv"
     if xio.exists():
         log = load_log(xio)
         yield "xio_accel", "x-io hand-held, never upside down", lambda: diagnose_accel(log)
-        yield "xio_marg", "x-io hand-held accel + mag", lambda: diagnose_marg(
-            log.acc, log.mag, t=log.t
+        yield (
+            "xio_marg",
+            "x-io hand-held accel + mag",
+            lambda: diagnose_marg(log.acc, log.mag, t=log.t),
         )
     from calib_jax.io.broad import load_broad
 
@@ -77,11 +89,17 @@ def logs():
         short = "broad" + trial[:2]
         tr = load_broad(path)
         ok = np.all(np.isfinite(tr.mag), axis=1) & np.all(np.isfinite(tr.acc), axis=1)
-        yield f"{short}_mag", f"BROAD trial {trial}, magnetometer", lambda tr=tr: diagnose_mag(
-            tr.mag, t=tr.t, sample_rate=tr.sample_rate
+        yield (
+            f"{short}_mag",
+            f"BROAD trial {trial}, magnetometer",
+            lambda tr=tr: diagnose_mag(tr.mag, t=tr.t, sample_rate=tr.sample_rate),
         )
-        yield f"{short}_marg", f"BROAD trial {trial}, accel + mag", lambda tr=tr, ok=ok: (
-            diagnose_marg(tr.acc[ok], tr.mag[ok], t=tr.t[ok], sample_rate=tr.sample_rate)
+        yield (
+            f"{short}_marg",
+            f"BROAD trial {trial}, accel + mag",
+            lambda tr=tr, ok=ok: diagnose_marg(
+                tr.acc[ok], tr.mag[ok], t=tr.t[ok], sample_rate=tr.sample_rate
+            ),
         )
 
 
