@@ -418,10 +418,10 @@ def _plausible(effect, theta_new, theta_cur, free_new) -> tuple[bool, str]:
     return not reasons, "; ".join(reasons)
 
 
-def _step(label, fit, n_rejected) -> dict:
+def _step(label, fit, n_rejected, effect=None) -> dict:
     return {
         "model": label,
-        "added_effect": None,
+        "added_effect": effect,
         "n_params": fit["n_params"],
         "rms": fit["rms"],
         "bic": fit["bic"],

@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lm import is_converged, lm_solve
+from ..lm import lm_solve
 from ..rotations import describe_permutation, rotvec_to_dcm, signed_permutations
 from ..static import detect_static
 from .floors import allan_deviation
@@ -40,6 +40,8 @@ from .loop import (
     Diagnosis,
     Observations,
     _not_possible,
+    _step,
+    _summary,
     driver_designs,
     regress_drivers,
 )
@@ -86,29 +88,6 @@ def _fit_one(p0, a, t, tm, m, P, w, free):
 @functools.lru_cache(maxsize=1)
 def _compiled():
     return jax.jit(jax.vmap(_fit_one))
-
-
-def _summary(p, se, status, e, J, w, free) -> dict:
-    act = w > 0
-    m = int(act.sum())
-    k = int(free.sum())
-    rss = float(np.sum(w * e * e))
-    Jf = J[:, free] * np.sqrt(w)[:, None]
-    C = np.linalg.pinv(Jf.T @ Jf)
-    h = np.einsum("ij,jk,ik->i", Jf, C, Jf)
-    loo = e / np.clip(1 - h, 1e-6, None)
-    return {
-        "theta": p,
-        "stderr": se,
-        "converged": is_converged(int(status)),
-        "e": e,
-        "loo": loo,
-        "rms": math.sqrt(rss / m),
-        "bic": m * math.log(rss / m) + k * math.log(m),
-        "loo_rms": float(np.sqrt(np.mean(loo[act] ** 2))),
-        "n_params": k,
-        "m": m,
-    }
 
 
 def _run(rows, a, t, tm):
@@ -238,7 +217,7 @@ def diagnose_marg(
     rng = np.random.default_rng(seed)
     L = max(1, int(round(m ** (1 / 3))))
     cur, free, P_cur, effects, steps, rounds = base, base_free.copy(), eye, [], [], []
-    steps.append(_step("base", None, base))
+    steps.append(_step("base", base, 0))
     remaining = ["sensor_misalignment", "timing_offset"]
     for _ in range(2):
         rows, idx = [], {}
@@ -312,7 +291,7 @@ def diagnose_marg(
             P_cur = P_best
         effects.append(c)
         remaining.remove(c)
-        steps.append(_step("+".join(["base", *effects]), c, fit))
+        steps.append(_step("+".join(["base", *effects]), fit, 0, effect=c))
         st = steps[-1]
         if c == "sensor_misalignment":
             st["coefficients"] = {
@@ -409,16 +388,3 @@ def diagnose_marg(
         e_base=base["e"],
         e_final=cur["e"],
     )
-
-
-def _step(label, effect, fit) -> dict:
-    return {
-        "model": label,
-        "added_effect": effect,
-        "n_params": fit["n_params"],
-        "rms": fit["rms"],
-        "bic": fit["bic"],
-        "loo_rms": fit["loo_rms"],
-        "n_observations": fit["m"],
-        "n_rejected": 0,
-    }
