@@ -137,16 +137,8 @@ class AccelCalibration:
             "date": self.date,
             "source": self.source,
             "units": {"input": self.input_units, "output": self.output_units, "g": self.g},
-            "params": {
-                "gains": p[0:3].tolist(),
-                "nonorth": p[3:6].tolist(),
-                "bias": p[6:9].tolist(),
-            },
-            "stderr": {
-                "gains": s[0:3].tolist(),
-                "nonorth": s[3:6].tolist(),
-                "bias": s[6:9].tolist(),
-            },
+            "params": split_params(p),
+            "stderr": split_params(s),
             "covariance": self.covariance.tolist(),
             "correlation": self.correlation.tolist(),
             "condition": self.condition,
@@ -225,6 +217,12 @@ class AccelCalibration:
     @classmethod
     def load(cls, path: str | Path) -> AccelCalibration:
         return cls.from_dict(_read_json(path))
+
+
+def split_params(p: np.ndarray) -> dict:
+    """Paper 1's nine-vector as the JSON's {gains, nonorth, bias} lists."""
+    p = np.asarray(p)
+    return {"gains": p[0:3].tolist(), "nonorth": p[3:6].tolist(), "bias": p[6:9].tolist()}
 
 
 def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .calibration import split_params
 from .io.serial import Batch, SerialReader, log_columns
 from .static import detect_static, distinct_directions
 
@@ -601,16 +602,8 @@ def calibrate_devices(
             p, s = params[i], stderr[i]
             if kind == "accel":
                 block = {
-                    "params": {
-                        "gains": p[0:3].tolist(),
-                        "nonorth": p[3:6].tolist(),
-                        "bias": p[6:9].tolist(),
-                    },
-                    "stderr": {
-                        "gains": s[0:3].tolist(),
-                        "nonorth": s[3:6].tolist(),
-                        "bias": s[6:9].tolist(),
-                    },
+                    "params": split_params(p),
+                    "stderr": split_params(s),
                     "g": ref,
                     "static_samples": int(masks[i].sum()),
                 }
