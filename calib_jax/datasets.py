@@ -24,25 +24,30 @@ def mag_demo_log_path() -> Path:
     )
 
 
-def broad_excerpt_path() -> Path:
-    """Every 10th sample of BROAD trial 02 (CC-BY-4.0, Laidig et al. 2021), CSV with t,
-    acc (m/s^2), mag (uT), optical quaternion qw..qz (sensor -> ENU) and movement. See
-    ``data/broad_excerpt/NOTES.md``."""
+BROAD_EXCERPTS = {
+    "02": "02_undisturbed_slow_rotation_B_every10.csv",
+    "05": "05_undisturbed_slow_rotation_with_breaks_B_every10.csv",
+}
+BROAD_EXCERPT_RATE = 285.714 / 10
+"""Sample rate of the excerpts (Hz): every 10th sample of BROAD's 285.714 Hz."""
+
+
+def broad_excerpt_path(trial: str = "02") -> Path:
+    """Every 10th sample of BROAD trial 02 (slow rotation) or 05 (slow rotation with breaks)
+    (CC-BY-4.0, Laidig et al. 2021), CSV with t, acc (m/s^2), mag (uT), optical quaternion
+    qw..qz (sensor -> ENU) and movement. See ``data/broad_excerpt/NOTES.md``."""
+    if trial not in BROAD_EXCERPTS:
+        raise ValueError(f"trial must be one of {sorted(BROAD_EXCERPTS)}, got {trial!r}")
     return Path(
-        str(
-            resources.files("calib_jax")
-            / "data"
-            / "broad_excerpt"
-            / "02_undisturbed_slow_rotation_B_every10.csv"
-        )
+        str(resources.files("calib_jax") / "data" / "broad_excerpt" / BROAD_EXCERPTS[trial])
     )
 
 
-def load_broad_excerpt() -> dict:
-    """The BROAD excerpt as arrays: t, acc, mag, quat (NaN rows kept), movement (bool)."""
+def load_broad_excerpt(trial: str = "02") -> dict:
+    """A BROAD excerpt as arrays: t, acc, mag, quat (NaN rows kept), movement (bool)."""
     import numpy as np
 
-    d = np.genfromtxt(broad_excerpt_path(), delimiter=",", names=True)
+    d = np.genfromtxt(broad_excerpt_path(trial), delimiter=",", names=True)
     return {
         "t": d["t"],
         "acc": np.column_stack([d["ax"], d["ay"], d["az"]]),

@@ -54,7 +54,7 @@ class AccelParams(eqx.Module):
 
     def to_vector(self) -> Float[Array, 9]:
         """Paper 1's parameter vector p."""
-        return jnp.concatenate([self.gains, self.nonorth, self.bias])
+        return jnp.concatenate([self.gains, self.nonorth, self.bias], axis=-1)
 
     @property
     def alpha(self) -> Float[Array, "3 3"]:

@@ -1,0 +1,253 @@
+"""End-to-end calibration against a reference attitude, by gradients through the whole pipeline.
+
+The two-stage way (what :func:`calib_jax.calibrate_marg` does) fits each sensor to its own
+sphere, aligns the magnetometer to the accelerometer by the constancy of the angle between
+them, and only then estimates attitude. Every stage minimises its own error, not the attitude
+error. Given a reference attitude (an optical tracker, as in the BROAD benchmark), the
+calibration can instead minimise the attitude error itself::
+
+    raw acc, raw mag --(MargParams)--> a, m --(Gauss-Newton, paper 2 sec. 3)--> q(theta)
+    e_i = 2 vec(q_i(theta) (x) q_ref,i^-1)         (about the rotation error in rad, 3 per sample)
+
+over theta = (magnetometer hard iron c, symmetric soft iron W, the accel-mag rotation, the
+dip), by Levenberg-Marquardt with exact Jacobians: forward-mode autodiff through the vmapped
+Gauss-Newton iterations, the TRIAD start and the calibration. The Gauss-Newton estimator
+normalises m, so the scale of W is not observable; one extra residual holds the mean
+calibrated |m| at 1.
+
+Both start from the same two-stage result and are judged by :func:`attitude_errors` (BROAD's
+heading and inclination error) on a trial that was not used for fitting.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .align import align_mag_to_accel
+from .lm import LMResult, lm_solve
+from .pipeline import MagParams, MargParams, Rotation, _sym, attitude, fit_mag
+from .rotations import dcm_to_quat, heading_inclination_error_deg, quat_conj, quat_multiply
+
+
+def attitude_errors(q_est: jax.Array, q_ref: jax.Array) -> jax.Array:
+    """(N, 2): BROAD's [heading, inclination] error in degrees of each sample."""
+    return jax.vmap(heading_inclination_error_deg)(q_est, q_ref)
+
+
+def rotation_residual(q_est: jax.Array, q_ref: jax.Array) -> jax.Array:
+    """(N, 3): 2 vec(q_est (x) q_ref^-1) with w >= 0, the rotation error in rad to first order
+    (earth frame; its z component is the heading error)."""
+    e = jax.vmap(lambda a, b: quat_multiply(a, quat_conj(b)))(q_est, q_ref)
+    e = jnp.where(e[:, :1] < 0, -e, e)
+    return 2.0 * e[:, 1:]
+
+
+# the adjusted parameters as one vector: [hard iron (3), symmetric soft iron (6, paper 1's
+# alpha layout xx yy zz xy xz yz), rotation vector mag -> acc (3), dip (deg)]
+N_E2E = 13
+
+
+def pack(params: MargParams, dip_deg: float | jax.Array) -> jax.Array:
+    W = params.mag.soft_iron
+    return jnp.concatenate(
+        [
+            params.mag.hard_iron,
+            jnp.stack([W[0, 0], W[1, 1], W[2, 2], W[0, 1], W[0, 2], W[1, 2]]),
+            params.mag_to_acc.rotvec,
+            jnp.asarray(dip_deg, W.dtype)[None],
+        ]
+    )
+
+
+def unpack(theta: jax.Array, base: MargParams, dip_deg=None) -> tuple[MargParams, jax.Array]:
+    """Inverse of :func:`pack`; a 12-vector (dip held) takes the dip from ``dip_deg``."""
+    W = _sym(theta[3:9])
+    dip = theta[12] if theta.shape[0] == N_E2E else jnp.asarray(dip_deg, theta.dtype)
+    return MargParams(base.acc, MagParams(theta[:3], W), Rotation(theta[9:12])), dip
+
+
+def _residual(theta, args):
+    base, dip0, acc, mag, q_ref, w = args
+    p, dip = unpack(theta, base, dip0)
+    q = attitude(p, acc, mag, dip)
+    e = rotation_residual(q, q_ref) * jnp.sqrt(w)[:, None]
+    m = p.mag.apply(mag)
+    norm = jnp.sum(w * jnp.linalg.norm(m, axis=1)) / jnp.sum(w)
+    return jnp.concatenate([e.ravel(), (norm - 1.0)[None] * jnp.sqrt(jnp.sum(w))])
+
+
+@dataclass(frozen=True)
+class TwoStage:
+    params: MargParams
+    dip_deg: float
+    mag_fit_status: int
+    alignment_status: str
+    alignment_message: str
+
+
+def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
+    """Fit the magnetometer ellipsoid (:func:`calib_jax.pipeline.fit_mag`, unit field), then
+    the accel-mag rotation and dip by the angle constancy (:func:`calib_jax.align_mag_to_accel`).
+    The accelerometer is used as given."""
+    acc = np.asarray(acc, float)
+    mag = np.asarray(mag, float)
+    fit = jax.jit(fit_mag)(jnp.asarray(mag), 1.0)
+    m = np.asarray(fit.params.apply(jnp.asarray(mag)))
+    al = align_mag_to_accel(acc, m, search_permutations=False)
+    rot = Rotation(jnp.asarray(_rotvec(al.R_acc_from_mag)))
+    from .models.accel import AccelParams
+
+    params = MargParams(AccelParams.identity(), fit.params, rot)
+    return TwoStage(params, al.dip_deg, int(fit.status), al.status, al.message)
+
+
+def _rotvec(R: np.ndarray) -> np.ndarray:
+    q = np.asarray(dcm_to_quat(jnp.asarray(R)))
+    ang = 2.0 * np.arctan2(np.linalg.norm(q[1:]), q[0])
+    n = np.linalg.norm(q[1:])
+    return np.zeros(3) if n == 0 else q[1:] / n * ang
+
+
+@dataclass(frozen=True)
+class EndToEnd:
+    params: MargParams
+    dip_deg: float
+    result: LMResult
+    """The LM fit of the flattened (hard iron, soft iron, rotation vector, dip)."""
+
+
+def end_to_end(
+    acc: np.ndarray,
+    mag: np.ndarray,
+    quat_ref: np.ndarray,
+    start: TwoStage,
+    *,
+    weights: np.ndarray | None = None,
+    fit_dip: bool = True,
+    max_iter: int = 50,
+) -> EndToEnd:
+    """Adjust the magnetometer calibration, the accel-mag rotation and the dip so that the
+    Gauss-Newton attitude matches ``quat_ref`` ([w, x, y, z], body -> ENU) in least squares,
+    from ``start``. Rows of ``quat_ref`` that are not finite are left out."""
+    acc = np.asarray(acc, float)
+    mag = np.asarray(mag, float)
+    quat_ref = np.asarray(quat_ref, float)
+    ok = np.all(np.isfinite(quat_ref), axis=1) & np.all(np.isfinite(acc), axis=1)
+    ok &= np.all(np.isfinite(mag), axis=1)
+    w = np.where(ok, 1.0 if weights is None else np.asarray(weights, float), 0.0)
+    q_ref = np.where(ok[:, None], quat_ref, np.array([1.0, 0, 0, 0]))
+    if ok.sum() < 50:
+        raise ValueError(f"only {int(ok.sum())} samples have a finite reference attitude")
+    dip0 = jnp.asarray(start.dip_deg)
+    args = (
+        start.params,
+        dip0,
+        jnp.asarray(acc),
+        jnp.asarray(mag),
+        jnp.asarray(q_ref),
+        jnp.asarray(w),
+    )
+    theta0 = pack(start.params, start.dip_deg)
+    res = _run(theta0 if fit_dip else theta0[:12], args, max_iter)
+    p, dip = unpack(res.params, start.params, dip0)
+    return EndToEnd(p, float(dip), res)
+
+
+@functools.partial(jax.jit, static_argnames=("max_iter",))
+def _run(theta0, args, max_iter):
+    return lm_solve(_residual, theta0, args, max_iter=max_iter)
+
+
+# ---------------------------------------------------------------------------------------------
+# the BROAD comparison (docs/end_to_end_broad.py, notebooks/05_in_a_jax_pipeline.ipynb)
+
+
+def rate_from_quat(quat: np.ndarray, sample_rate: float) -> np.ndarray:
+    """Angular rate (deg/s) from consecutive reference quaternions (NaN where either is
+    missing); used to tell quasi-static samples, where the Gauss-Newton estimator's model
+    (the accelerometer sees only gravity) holds, from fast motion, where it does not."""
+    q = np.asarray(quat, float)
+    e = np.asarray(jax.vmap(lambda a, b: quat_multiply(a, quat_conj(b)))(q[1:], q[:-1]))
+    ang = 2.0 * np.arctan2(np.linalg.norm(e[:, 1:], axis=1), np.abs(e[:, 0]))
+    r = np.degrees(ang) * sample_rate
+    out = np.full(len(q), np.nan)
+    out[1:] = r
+    out[0] = r[0] if len(r) else np.nan
+    # centred: the mean of the steps before and after
+    out[1:-1] = 0.5 * (r[:-1] + r[1:])
+    return out
+
+
+QUASI_STATIC_DEG_S = 5.0
+"""Samples turning slower than this (by the reference) count as quasi-static."""
+RATE_SCALE_DEG_S = 20.0
+"""Fit weight 1 / (1 + (rate / RATE_SCALE)^2): fast samples, where the accelerometer sees
+more than gravity and the estimator's tilt error (times tan(dip) in heading) is not the
+calibration's, count less."""
+
+
+def rate_weights(rate: np.ndarray) -> np.ndarray:
+    r = np.nan_to_num(np.asarray(rate, float), nan=np.inf)
+    return 1.0 / (1.0 + (r / RATE_SCALE_DEG_S) ** 2)
+
+
+def evaluate(
+    params: MargParams, dip_deg: float, acc, mag, quat_ref, mask: np.ndarray
+) -> dict[str, float]:
+    """RMS and median heading and inclination error (deg) over the samples in ``mask``."""
+    k = np.asarray(mask, bool) & np.all(np.isfinite(quat_ref), axis=1)
+    q = _attitude_jit(params, jnp.asarray(acc[k]), jnp.asarray(mag[k]), jnp.asarray(dip_deg))
+    e = np.asarray(attitude_errors(q, jnp.asarray(quat_ref[k])))
+    return {
+        "n": int(k.sum()),
+        "heading_rms": float(np.sqrt(np.mean(e[:, 0] ** 2))),
+        "inclination_rms": float(np.sqrt(np.mean(e[:, 1] ** 2))),
+        "heading_median": float(np.median(e[:, 0])),
+        "inclination_median": float(np.median(e[:, 1])),
+    }
+
+
+_attitude_jit = jax.jit(attitude)
+
+
+def compare(fit: dict, test: dict, *, sample_rate: float) -> dict:
+    """Before / two-stage / end-to-end (dip held) / end-to-end (dip fitted) on a fitting and a
+    held-out trial, each a dict with ``acc``, ``mag``, ``quat`` (and ``movement``, bool).
+
+    Returns ``{"methods": {name: {"params", "dip_deg", "fit": {...}, "test": {...}}}}`` where
+    each of "fit" and "test" has the errors on quasi-static samples (reference rate below
+    :data:`QUASI_STATIC_DEG_S`) and on BROAD's movement samples.
+    """
+    from .attitude import dip_from_data
+
+    rates = {k: rate_from_quat(d["quat"], sample_rate) for k, d in (("fit", fit), ("test", test))}
+    start = two_stage(fit["acc"], fit["mag"])
+    w = rate_weights(rates["fit"])
+    e2e = end_to_end(fit["acc"], fit["mag"], fit["quat"], start, weights=w, fit_dip=False)
+    e2e_dip = end_to_end(fit["acc"], fit["mag"], fit["quat"], start, weights=w, fit_dip=True)
+    methods = {
+        "before": (MargParams.identity(), dip_from_data(fit["acc"], fit["mag"]), None),
+        "two_stage": (start.params, start.dip_deg, None),
+        "end_to_end": (e2e.params, e2e.dip_deg, e2e.result),
+        "end_to_end_dip": (e2e_dip.params, e2e_dip.dip_deg, e2e_dip.result),
+    }
+    out = {}
+    for name, (p, dip, res) in methods.items():
+        row = {"params": p, "dip_deg": float(dip)}
+        if res is not None:
+            row["status"] = int(res.status)
+            row["iterations"] = int(res.iterations)
+        for split, d in (("fit", fit), ("test", test)):
+            qs = rates[split] < QUASI_STATIC_DEG_S
+            mov = np.asarray(d.get("movement", np.ones(len(d["acc"]), bool)), bool)
+            row[split] = {
+                "quasi_static": evaluate(p, dip, d["acc"], d["mag"], d["quat"], qs),
+                "movement": evaluate(p, dip, d["acc"], d["mag"], d["quat"], mov),
+            }
+        out[name] = row
+    return {"methods": out, "two_stage_alignment": start.alignment_status}

@@ -1,0 +1,446 @@
+"""Calibration as a JAX library: pytrees in, pytrees out, composable with jit, vmap and grad.
+
+For users who embed calibration in a larger JAX estimation pipeline (an attitude filter, a
+navigation solution, a learned model). Everything here is pure, works on one sensor (``vmap``
+for many), keeps the dtype of its inputs (float64 or float32) and is differentiable:
+
+Calibrations (``equinox`` modules, hence pytrees):
+
+- :class:`AccelParams` (paper 1, eq. 1): raw ``a' = alpha a + beta``; ``apply`` returns
+  ``a = alpha^-1 (a' - beta)`` in the unit of the reference magnitude.
+- :class:`MagParams`: hard iron ``c`` (raw units) and a soft-iron matrix ``W`` (output units
+  per raw unit); ``apply`` returns ``W (m' - c)`` (paper 2's compensation, section 2.2).
+- :class:`Rotation`: a rotation vector (rad); ``apply`` rotates row vectors, v -> R v.
+- :class:`MargParams`: accelerometer, magnetometer, and the rotation that takes the
+  calibrated magnetometer into the accelerometer's frame.
+
+Frames: every calibrated vector is in the sensor's own (body) frame, except that
+:class:`MargParams` returns the magnetometer in the accelerometer's frame. Attitude
+quaternions are [w, x, y, z] and rotate body vectors into ENU (the BROAD convention).
+
+Functions:
+
+- :func:`apply`, :func:`residual`: calibrated samples and the sphere residual.
+- :func:`fit_accel`, :func:`fit_mag`: the fit of one sensor, returning a :class:`Fit` whose
+  ``params`` are differentiable in the samples, the weights and the reference magnitude by
+  the implicit function theorem (:func:`calib_jax.implicit.solve_implicit`), never by
+  unrolling the LM loop. :func:`fit_batch` vmaps either over a leading sensor axis.
+- :func:`attitude`: the Gauss-Newton quaternion (paper 2, sec. 3) of every sample from raw
+  accelerometer and magnetometer through a :class:`MargParams`.
+- :func:`propagate`, :func:`calibrated_covariance`, :func:`attitude_std`: the parameter
+  covariance carried to any output by its Jacobian (first order).
+
+Not converged: a :class:`Fit` carries the solver ``status`` (``Fit.converged`` inside jit).
+The implicit derivative is that of the optimum near the returned point; where the fit did not
+converge it does not describe the returned parameters (see :mod:`calib_jax.implicit`).
+
+float32: supported with a documented accuracy (README "In a JAX pipeline"): the fit stops at
+float32 round-off, about 1e-5 of the gains; the implicit derivatives are good to ~1e-3 of
+their scale. float64 is the default for calibration (``jax_enable_x64``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+from jaxtyping import Array, Float, Int
+
+from .accel import initial_guess
+from .attitude import gauss_newton_quaternion, reference_vectors
+from .implicit import solve_implicit
+from .linalg import inv3
+from .lm.status import CONVERGED_STATUSES
+from .mag import ellipsoid_start
+from .models.accel import AccelParams, alpha_matrix, correct
+from .models.mag import sqrtm_spd, unpack
+from .rotations import euler_zyx_deg, rotvec_to_dcm
+
+__all__ = [
+    "AccelParams",
+    "Fit",
+    "MagParams",
+    "MargParams",
+    "Rotation",
+    "apply",
+    "attitude",
+    "attitude_std",
+    "block_covariance",
+    "calibrated_covariance",
+    "euler_deg",
+    "fit_accel",
+    "fit_batch",
+    "fit_mag",
+    "propagate",
+    "residual",
+]
+
+
+# ---------------------------------------------------------------------------------------------
+# calibrations
+
+
+def _sym(v: jax.Array) -> jax.Array:
+    """[xx, yy, zz, xy, xz, yz] -> symmetric 3x3 (paper 1's alpha layout)."""
+    return alpha_matrix(jnp.concatenate([v, jnp.zeros(3, v.dtype)]))
+
+
+def _sym_vec(S: jax.Array) -> jax.Array:
+    return jnp.stack([S[0, 0], S[1, 1], S[2, 2], S[0, 1], S[0, 2], S[1, 2]])
+
+
+class MagParams(eqx.Module):
+    """Hard and soft iron of one magnetometer (or any ellipsoid-to-sphere map)."""
+
+    hard_iron: Float[Array, 3]
+    """c: the reading at zero field, raw units."""
+    soft_iron: Float[Array, "3 3"]
+    """W: output units per raw unit; :func:`fit_mag` returns it symmetric (paper 2's
+    compensation matrix R diag(r / semi_axes) R')."""
+
+    def apply(self, raw: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """Calibrated field W (m' - c), in the unit of the fit's reference magnitude."""
+        return (raw - self.hard_iron) @ self.soft_iron.T
+
+    @classmethod
+    def identity(cls, dtype=jnp.float64) -> MagParams:
+        """No hard iron, unit soft iron (a reference point, never a fit result)."""
+        return cls(hard_iron=jnp.zeros(3, dtype), soft_iron=jnp.eye(3, dtype=dtype))
+
+
+class Rotation(eqx.Module):
+    """A rotation by its rotation vector (axis times angle, rad): smooth near identity."""
+
+    rotvec: Float[Array, 3]
+
+    @property
+    def matrix(self) -> Float[Array, "3 3"]:
+        return rotvec_to_dcm(self.rotvec)
+
+    def apply(self, v: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """v -> R v for row vectors (..., 3)."""
+        return v @ self.matrix.T
+
+    @classmethod
+    def identity(cls, dtype=jnp.float64) -> Rotation:
+        return cls(rotvec=jnp.zeros(3, dtype))
+
+
+class MargParams(eqx.Module):
+    """One accelerometer + magnetometer board: both calibrations and the accel-mag rotation."""
+
+    acc: AccelParams
+    mag: MagParams
+    mag_to_acc: Rotation
+    """Rotates the calibrated magnetometer into the accelerometer's frame."""
+
+    def apply(
+        self, acc_raw: Float[Array, "... 3"], mag_raw: Float[Array, "... 3"]
+    ) -> tuple[jax.Array, jax.Array]:
+        """(accelerometer, magnetometer), both calibrated and in the accelerometer's frame."""
+        return _apply_accel(self.acc, acc_raw), self.mag_to_acc.apply(self.mag.apply(mag_raw))
+
+    @classmethod
+    def identity(cls, dtype=jnp.float64) -> MargParams:
+        return cls(AccelParams.identity(dtype), MagParams.identity(dtype), Rotation.identity(dtype))
+
+
+def _apply_accel(p: AccelParams, raw: jax.Array) -> jax.Array:
+    return (raw - p.bias) @ inv3(p.alpha).T
+
+
+Calibration = AccelParams | MagParams
+
+
+def apply(params: Calibration | MargParams, *raw: jax.Array):
+    """Calibrated samples: ``apply(accel_or_mag_params, raw)`` -> (..., 3), or
+    ``apply(marg_params, acc_raw, mag_raw)`` -> (acc, mag) in the accelerometer's frame."""
+    if isinstance(params, AccelParams):
+        (x,) = raw
+        return _apply_accel(params, x)
+    return params.apply(*raw)
+
+
+def residual(params: Calibration, raw: Float[Array, "N 3"], magnitude=1.0) -> jax.Array:
+    """|apply(params, raw)| - magnitude for each sample, in the unit of ``magnitude`` (the
+    sphere residual as a distance; paper 1's eq. 6 is its product with |a| + magnitude)."""
+    y = apply(params, raw)
+    return jnp.sqrt(jnp.sum(y * y, axis=-1)) - magnitude
+
+
+# ---------------------------------------------------------------------------------------------
+# fits
+
+
+class Fit(eqx.Module):
+    """A fitted calibration with its uncertainty and the solver's account.
+
+    ``covariance`` is over ``jax.flatten_util.ravel_pytree(params)[0]`` (for
+    :class:`AccelParams` that is paper 1's order [gains, nonorth, bias]; for
+    :class:`MagParams` [hard_iron, soft_iron row-major], singular because W is symmetric),
+    scaled by the reduced chi2 unless the weights were 1/sigma^2 (``absolute_sigma=True``).
+    """
+
+    params: AccelParams | MagParams
+    covariance: Float[Array, "n n"]
+    status: Int[Array, ""]
+    """:class:`calib_jax.lm.Status` code; see ``converged``."""
+    rms: Float[Array, ""]
+    """Weighted RMS of :func:`residual` at the optimum, unit of the magnitude."""
+    iterations: Int[Array, ""]
+
+    @property
+    def converged(self) -> jax.Array:
+        """Boolean array (usable inside jit and vmap)."""
+        return jnp.isin(self.status, jnp.asarray([int(c) for c in CONVERGED_STATUSES]))
+
+    @property
+    def stderr(self) -> jax.Array:
+        """Standard errors in the order of ``covariance``."""
+        return jnp.sqrt(jnp.diagonal(self.covariance, axis1=-2, axis2=-1))
+
+
+def _normalisation(raw, w):
+    """Centre and RMS radius of the data (held constant under differentiation: the fit is an
+    exact reparametrisation, so they only condition the solve)."""
+    wsum = jnp.sum(w)
+    m = (w @ raw) / wsum
+    s = jnp.sqrt(jnp.sum(w * jnp.sum((raw - m) ** 2, axis=-1)) / wsum)
+    return jax.lax.stop_gradient(m), jax.lax.stop_gradient(s)
+
+
+def _accel_residual(p, args):
+    # |a| / g - 1 (the relative form of :func:`residual`), not paper 1's 1 - |a|^2 / g^2: the
+    # same minimiser to second order, and a residual whose sigma is that of |a| / g, so that
+    # weights 1 / sigma^2 mean the same thing in fit_accel and fit_mag
+    x, _, g = args
+    a = correct(p, x) / g
+    return jnp.sqrt(jnp.sum(a * a, axis=-1)) - 1.0
+
+
+def _mag_residual(p, args):
+    x, _, field = args
+    y = (x - p[6:9]) @ _sym(p[:6]).T
+    return jnp.sqrt(jnp.sum(y * y, axis=-1)) / field - 1.0
+
+
+def _weights(args):
+    return args[1]
+
+
+def _prepare(raw, magnitude, weights):
+    raw = jnp.asarray(raw)
+    if raw.ndim != 2 or raw.shape[-1] != 3:
+        raise ValueError(f"raw must be (N, 3) for one sensor (vmap for many), got {raw.shape}")
+    if raw.shape[0] < 10:
+        raise ValueError(f"{raw.shape[0]} samples cannot determine 9 parameters: record >= 10")
+    dtype = raw.dtype if jnp.issubdtype(raw.dtype, jnp.floating) else jnp.float64
+    raw = raw.astype(dtype)
+    w = jnp.ones(raw.shape[0], dtype) if weights is None else jnp.asarray(weights, dtype)
+    return raw, jnp.asarray(magnitude, dtype), w
+
+
+def _finish(params, res, D, raw, w, magnitude):
+    cov = D @ res.covariance @ D.T
+    e = residual(params, raw, magnitude)
+    rms = jnp.sqrt(jnp.sum(w * e * e) / jnp.sum(w))
+    return Fit(params=params, covariance=cov, status=res.status, rms=rms, iterations=res.iterations)
+
+
+def fit_accel(
+    raw: Float[Array, "N 3"],
+    magnitude: float | jax.Array = 1.0,
+    weights: Float[Array, " N"] | None = None,
+    *,
+    update_type: int = 1,
+    max_iter: int = 100,
+    absolute_sigma: bool = False,
+) -> Fit:
+    """Paper 1's nine-parameter fit of one accelerometer (static samples or interval means):
+    minimise sum w (|a| / g - 1)^2, a = alpha^-1 (a' - beta), from the algebraic ellipsoid.
+
+    Parameters
+    ----------
+    raw : (N, 3)
+        Readings in any unit (counts, g, m/s^2), at rest in N >= 10 orientations.
+    magnitude : scalar
+        The reference |g| in the unit the calibrated output should have. Differentiable.
+    weights : (N,), optional
+        Per-sample weights (0 masks a sample out). Differentiable. With
+        ``absolute_sigma=True`` they are 1 / sigma^2, sigma the noise of |a| / g.
+    update_type, max_iter : static
+        Paper 1's lambda scheme (1, 2, 3) and the iteration budget.
+
+    Returns a :class:`Fit` whose ``params`` (:class:`AccelParams`) are differentiable in
+    ``raw``, ``magnitude`` and ``weights`` by the implicit function theorem. Jittable and
+    vmappable (see :func:`fit_batch`); one compile per (N, dtype, static options).
+    """
+    raw, g, w = _prepare(raw, magnitude, weights)
+    m, s = _normalisation(raw, w)
+    x = (raw - m) / s
+    p0 = initial_guess(x, w)
+    p0 = jnp.concatenate([p0[:6] / g, p0[6:]])  # the start is for |a| = 1
+    pn, res = solve_implicit(
+        _accel_residual,
+        p0,
+        (x, w, g),
+        weights=_weights,
+        update_type=update_type,
+        max_iter=max_iter,
+        absolute_sigma=absolute_sigma,
+    )
+    # back to raw units: alpha = s alpha_n, beta = s beta_n + m (exact for the model)
+    p = jnp.concatenate([s * pn[:6], s * pn[6:] + m])
+    params = AccelParams.from_vector(p)
+    D = s * jnp.eye(9, dtype=raw.dtype)
+    return _finish(params, res, D, raw, w, g)
+
+
+def fit_mag(
+    raw: Float[Array, "N 3"],
+    magnitude: float | jax.Array = 1.0,
+    weights: Float[Array, " N"] | None = None,
+    *,
+    update_type: int = 1,
+    max_iter: int = 100,
+    absolute_sigma: bool = False,
+) -> Fit:
+    """Hard and soft iron of one magnetometer: minimise sum w (|W (m' - c)| - B)^2 over c and
+    symmetric W (9 parameters, the full ellipsoid of paper 2), from paper 2's constrained
+    algebraic ellipsoid.
+
+    ``magnitude`` B is the field the output should have (1 for unit vectors, the local field
+    in uT, ...). Returns a :class:`Fit` with :class:`MagParams`, differentiable in ``raw``,
+    ``magnitude`` and ``weights``; jittable and vmappable. Needs a well-covered sphere of
+    orientations (see :func:`calib_jax.calibrate_mag` for the coverage checks and the smaller
+    sphere/diag models that partial coverage calls for).
+    """
+    raw, B, w = _prepare(raw, magnitude, weights)
+    m, s = _normalisation(raw, w)
+    x = (raw - m) / s
+    c0, M0 = unpack(ellipsoid_start(x, w, "full"), "full")
+    W0 = B * sqrtm_spd(M0)
+    p0 = jnp.concatenate([_sym_vec(W0), c0])
+    pn, res = solve_implicit(
+        _mag_residual,
+        p0,
+        (x, w, B),
+        weights=_weights,
+        update_type=update_type,
+        max_iter=max_iter,
+        absolute_sigma=absolute_sigma,
+    )
+    # W (m' - c) = W_n (x - c_n) with x = (m' - m) / s: W = W_n / s, c = s c_n + m
+    W = _sym(pn[:6]) / s
+    c = s * pn[6:] + m
+    params = MagParams(hard_iron=c, soft_iron=W)
+    # d(ravel(params))/d(pn): the covariance in the pytree's own coordinates
+    embed = jax.jacfwd(lambda q: jnp.concatenate([s * q[6:] + m, (_sym(q[:6]) / s).ravel()]))
+    return _finish(params, res, embed(pn), raw, w, B)
+
+
+def fit_batch(
+    fit: Callable[..., Fit],
+    raw: Float[Array, "S N 3"],
+    magnitude: float | Float[Array, " S"] = 1.0,
+    weights: Float[Array, "S N"] | None = None,
+    **options,
+) -> Fit:
+    """``fit`` (:func:`fit_accel` or :func:`fit_mag`) over a leading sensor axis: a Fit whose
+    leaves have that axis. ``magnitude`` is shared or per sensor; pad unequal logs with zero
+    weights. Same derivatives as the single fit."""
+    raw = jnp.asarray(raw)
+    mag = jnp.broadcast_to(jnp.asarray(magnitude, raw.dtype), raw.shape[:1])
+    if weights is None:
+        weights = jnp.ones(raw.shape[:2], raw.dtype)
+    return jax.vmap(lambda r, g, w: fit(r, g, w, **options))(raw, mag, weights)
+
+
+# ---------------------------------------------------------------------------------------------
+# attitude
+
+
+def attitude(
+    params: MargParams,
+    acc_raw: Float[Array, "N 3"],
+    mag_raw: Float[Array, "N 3"],
+    dip_deg: float | jax.Array,
+    iterations: int = 6,
+) -> Float[Array, "N 4"]:
+    """Gauss-Newton quaternion (body -> ENU, paper 2 sec. 3) of every sample, from raw data
+    through ``params``. Differentiable in the parameters, the data and the dip (through the
+    fixed number of Gauss-Newton steps, from the TRIAD start)."""
+    a, m = params.apply(acc_raw, mag_raw)
+    r_a, r_m = reference_vectors(dip_deg)
+    r_a, r_m = r_a.astype(a.dtype), r_m.astype(a.dtype)
+    return jax.vmap(lambda ai, mi: gauss_newton_quaternion(ai, mi, r_a, r_m, None, iterations)[0])(
+        a, m
+    )
+
+
+def euler_deg(quat: Float[Array, "... 4"]) -> Float[Array, "... 3"]:
+    """[roll, pitch, yaw] in degrees (ZYX) of body -> ENU quaternions (..., 4)."""
+    flat = quat.reshape(-1, 4)
+    return jax.vmap(euler_zyx_deg)(flat).reshape(quat.shape[:-1] + (3,))
+
+
+# ---------------------------------------------------------------------------------------------
+# uncertainty to the outputs
+
+
+def propagate(
+    f: Callable[[object], jax.Array], params, covariance: Float[Array, "n n"]
+) -> jax.Array:
+    """First-order covariance of ``f(params)`` (..., k) per leading index: J C J' (..., k, k),
+    J = d f / d ravel_pytree(params), by forward-mode autodiff. ``covariance`` is over
+    ``ravel_pytree(params)[0]`` (what :class:`Fit` reports; block-diagonal for independent
+    fits, see :func:`block_covariance`)."""
+    flat, unravel = ravel_pytree(params)
+
+    def g(v):
+        return f(unravel(v))
+
+    J = jax.jacfwd(g)(flat)  # (..., k, n)
+    return jnp.einsum("...in,nm,...jm->...ij", J, covariance, J)
+
+
+def block_covariance(*covs: jax.Array) -> jax.Array:
+    """Block-diagonal covariance for independent parts, in the given order."""
+    return jax.scipy.linalg.block_diag(*covs)
+
+
+def calibrated_covariance(
+    params: Calibration,
+    covariance: Float[Array, "n n"],
+    raw: Float[Array, "N 3"],
+    noise_cov: Float[Array, "3 3"] | None = None,
+) -> Float[Array, "N 3 3"]:
+    """Covariance (N, 3, 3) of the calibrated samples from the parameter covariance (the
+    calibration's share of the error), plus the raw noise ``noise_cov`` carried through the
+    calibration when given."""
+    C = propagate(lambda p: apply(p, raw), params, covariance)
+    if noise_cov is not None:
+        G = jax.jacfwd(lambda r: apply(params, r))(raw[0])  # linear in raw: same for all
+        C = C + G @ noise_cov @ G.T
+    return C
+
+
+def attitude_std(
+    params: MargParams,
+    covariance: Float[Array, "n n"],
+    acc_raw: Float[Array, "N 3"],
+    mag_raw: Float[Array, "N 3"],
+    dip_deg: float | jax.Array,
+    iterations: int = 6,
+) -> Float[Array, "N 3"]:
+    """Standard deviation (deg) of [roll, pitch, yaw] of every sample due to the calibration's
+    uncertainty (``covariance`` over ``ravel_pytree(params)[0]``), to first order. Wrap-around
+    of yaw near +-180 deg is taken care of by differentiating the angle itself (smooth away
+    from the gimbal lock at pitch +-90 deg, where roll and yaw are undefined)."""
+    C = propagate(
+        lambda p: euler_deg(attitude(p, acc_raw, mag_raw, dip_deg, iterations)), params, covariance
+    )
+    return jnp.sqrt(jnp.diagonal(C, axis1=-2, axis2=-1))
