@@ -30,7 +30,15 @@ import numpy as np
 
 from .align import align_mag_to_accel
 from .lm import LMResult, lm_solve
-from .pipeline import MagParams, MargParams, Rotation, _sym, attitude, fit_mag
+from .pipeline import (
+    MagParams,
+    MargParams,
+    Rotation,
+    _sym,
+    attitude,
+    block_covariance,
+    fit_mag,
+)
 from .rotations import dcm_to_quat, heading_inclination_error_deg, quat_conj, quat_multiply
 
 
@@ -88,6 +96,10 @@ class TwoStage:
     mag_fit_status: int
     alignment_status: str
     alignment_message: str
+    covariance: np.ndarray
+    """Over ``ravel_pytree(params)[0]``: zero for the accelerometer (used as given), the
+    ellipsoid fit's for the magnetometer, the alignment's standard errors (uncorrelated) for
+    the rotation vector; for :func:`calib_jax.pipeline.attitude_std`."""
 
 
 def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
@@ -103,7 +115,10 @@ def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
     from .models.accel import AccelParams
 
     params = MargParams(AccelParams.identity(), fit.params, rot)
-    return TwoStage(params, al.dip_deg, int(fit.status), al.status, al.message)
+    cov = block_covariance(
+        jnp.zeros((9, 9)), fit.covariance, jnp.diag(np.radians(al.rotvec_stderr_deg) ** 2)
+    )
+    return TwoStage(params, al.dip_deg, int(fit.status), al.status, al.message, np.asarray(cov))
 
 
 def _rotvec(R: np.ndarray) -> np.ndarray:
@@ -250,4 +265,4 @@ def compare(fit: dict, test: dict, *, sample_rate: float) -> dict:
                 "movement": evaluate(p, dip, d["acc"], d["mag"], d["quat"], mov),
             }
         out[name] = row
-    return {"methods": out, "two_stage_alignment": start.alignment_status}
+    return {"methods": out, "two_stage_alignment": start.alignment_status, "start": start}
