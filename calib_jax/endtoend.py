@@ -39,7 +39,13 @@ from .pipeline import (
     block_covariance,
     fit_mag,
 )
-from .rotations import dcm_to_quat, heading_inclination_error_deg, quat_conj, quat_multiply
+from .rotations import (
+    dcm_to_quat,
+    heading_inclination_error_deg,
+    quat_conj,
+    quat_multiply,
+    rotvec_to_dcm,
+)
 
 
 def attitude_errors(q_est: jax.Array, q_ref: jax.Array) -> jax.Array:
@@ -55,12 +61,18 @@ def rotation_residual(q_est: jax.Array, q_ref: jax.Array) -> jax.Array:
     return 2.0 * e[:, 1:]
 
 
-# the adjusted parameters as one vector: [hard iron (3), symmetric soft iron (6, paper 1's
-# alpha layout xx yy zz xy xz yz), rotation vector mag -> acc (3), dip (deg)]
-N_E2E = 13
+# The adjusted parameters as one vector, blocks in this order, each present when fitted:
+#   calibration (12): hard iron (3), symmetric soft iron (6, paper 1's alpha layout xx yy zz xy
+#                     xz yz), rotation vector mag -> acc (3)
+#   dip (1):          degrees
+#   offset (4):       a constant error of the reference itself: body rotation vector between the
+#                     reference's body frame and the accelerometer's (3), heading offset of the
+#                     reference's north (1, rad); q_ref -> q_z(h) (x) q_ref (x) q(v)
+BLOCKS = (("calibration", 12), ("dip", 1), ("offset", 4))
 
 
 def pack(params: MargParams, dip_deg: float | jax.Array) -> jax.Array:
+    """The calibration block and the dip (13,) of ``params``."""
     W = params.mag.soft_iron
     return jnp.concatenate(
         [
@@ -72,21 +84,46 @@ def pack(params: MargParams, dip_deg: float | jax.Array) -> jax.Array:
     )
 
 
-def unpack(theta: jax.Array, base: MargParams, dip_deg=None) -> tuple[MargParams, jax.Array]:
-    """Inverse of :func:`pack`; a 12-vector (dip held) takes the dip from ``dip_deg``."""
+def unpack(theta: jax.Array, base: MargParams) -> MargParams:
+    """The calibration block (12,) -> MargParams (the accelerometer from ``base``)."""
     W = _sym(theta[3:9])
-    dip = theta[12] if theta.shape[0] == N_E2E else jnp.asarray(dip_deg, theta.dtype)
-    return MargParams(base.acc, MagParams(theta[:3], W), Rotation(theta[9:12])), dip
+    return MargParams(base.acc, MagParams(theta[:3], W), Rotation(theta[9:12]))
 
 
-def _residual(theta, args):
-    base, dip0, acc, mag, q_ref, w = args
-    p, dip = unpack(theta, base, dip0)
-    q = attitude(p, acc, mag, dip)
-    e = rotation_residual(q, q_ref) * jnp.sqrt(w)[:, None]
-    m = p.mag.apply(mag)
-    norm = jnp.sum(w * jnp.linalg.norm(m, axis=1)) / jnp.sum(w)
-    return jnp.concatenate([e.ravel(), (norm - 1.0)[None] * jnp.sqrt(jnp.sum(w))])
+def offset_reference(q_ref: jax.Array, offset: jax.Array) -> jax.Array:
+    """q_z(h) (x) q_ref (x) q(v) for offset = [v (3), h]: the reference corrected by a constant
+    body-frame rotation and a heading offset."""
+    qb = dcm_to_quat(rotvec_to_dcm(offset[:3]))
+    h = offset[3]
+    z = jnp.zeros((), q_ref.dtype)
+    qh = jnp.stack([jnp.cos(h / 2), z, z, jnp.sin(h / 2)])
+    return jax.vmap(lambda q: quat_multiply(qh, quat_multiply(q, qb)))(q_ref)
+
+
+def _split(theta, fitted, defaults):
+    """theta -> {block: value}, fitted blocks from theta, the others from ``defaults``."""
+    out, k = {}, 0
+    for name, n in BLOCKS:
+        if name in fitted:
+            out[name] = theta[k : k + n]
+            k += n
+        else:
+            out[name] = defaults[name]
+    return out
+
+
+def _residual(theta, args, fitted):
+    base, defaults, acc, mag, q_ref, w = args
+    b = _split(theta, fitted, defaults)
+    p = unpack(b["calibration"], base)
+    q = attitude(p, acc, mag, b["dip"][0])
+    e = rotation_residual(q, offset_reference(q_ref, b["offset"])) * jnp.sqrt(w)[:, None]
+    rows = [e.ravel()]
+    if "calibration" in fitted:
+        # the estimator normalises m: hold the scale of W by the mean calibrated |m| = 1
+        norm = jnp.sum(w * jnp.linalg.norm(p.mag.apply(mag), axis=1)) / jnp.sum(w)
+        rows.append((norm - 1.0)[None] * jnp.sqrt(jnp.sum(w)))
+    return jnp.concatenate(rows)
 
 
 @dataclass(frozen=True)
@@ -132,8 +169,12 @@ def _rotvec(R: np.ndarray) -> np.ndarray:
 class EndToEnd:
     params: MargParams
     dip_deg: float
+    offset: np.ndarray
+    """[body rotation vector (3, rad), heading offset (rad)] of the reference (zero unless
+    fitted)."""
     result: LMResult
-    """The LM fit of the flattened (hard iron, soft iron, rotation vector, dip)."""
+    """The LM fit of the fitted blocks (see :data:`BLOCKS`)."""
+    fitted: tuple[str, ...]
 
 
 def end_to_end(
@@ -143,12 +184,15 @@ def end_to_end(
     start: TwoStage,
     *,
     weights: np.ndarray | None = None,
-    fit_dip: bool = True,
+    fit_calibration: bool = True,
+    fit_dip: bool = False,
+    fit_offset: bool = False,
     max_iter: int = 50,
 ) -> EndToEnd:
-    """Adjust the magnetometer calibration, the accel-mag rotation and the dip so that the
-    Gauss-Newton attitude matches ``quat_ref`` ([w, x, y, z], body -> ENU) in least squares,
-    from ``start``. Rows of ``quat_ref`` that are not finite are left out."""
+    """Adjust the magnetometer calibration and the accel-mag rotation (and optionally the dip,
+    and a constant offset of the reference itself) so that the Gauss-Newton attitude matches
+    ``quat_ref`` ([w, x, y, z], body -> ENU) in least squares, from ``start``. Rows of
+    ``quat_ref`` that are not finite are left out."""
     acc = np.asarray(acc, float)
     mag = np.asarray(mag, float)
     quat_ref = np.asarray(quat_ref, float)
@@ -158,24 +202,38 @@ def end_to_end(
     q_ref = np.where(ok[:, None], quat_ref, np.array([1.0, 0, 0, 0]))
     if ok.sum() < 50:
         raise ValueError(f"only {int(ok.sum())} samples have a finite reference attitude")
-    dip0 = jnp.asarray(start.dip_deg)
+    fitted = tuple(
+        name
+        for name, on in (("calibration", fit_calibration), ("dip", fit_dip), ("offset", fit_offset))
+        if on
+    )
+    if not fitted:
+        raise ValueError("nothing to fit: set fit_calibration, fit_dip or fit_offset")
+    packed = pack(start.params, start.dip_deg)
+    defaults = {"calibration": packed[:12], "dip": packed[12:], "offset": jnp.zeros(4)}
+    theta0 = jnp.concatenate([defaults[name] for name in fitted])
     args = (
         start.params,
-        dip0,
+        defaults,
         jnp.asarray(acc),
         jnp.asarray(mag),
         jnp.asarray(q_ref),
         jnp.asarray(w),
     )
-    theta0 = pack(start.params, start.dip_deg)
-    res = _run(theta0 if fit_dip else theta0[:12], args, max_iter)
-    p, dip = unpack(res.params, start.params, dip0)
-    return EndToEnd(p, float(dip), res)
+    res = _run(theta0, args, max_iter, fitted)
+    b = _split(res.params, fitted, defaults)
+    return EndToEnd(
+        unpack(b["calibration"], start.params),
+        float(b["dip"][0]),
+        np.asarray(b["offset"]),
+        res,
+        fitted,
+    )
 
 
-@functools.partial(jax.jit, static_argnames=("max_iter",))
-def _run(theta0, args, max_iter):
-    return lm_solve(_residual, theta0, args, max_iter=max_iter)
+@functools.partial(jax.jit, static_argnames=("max_iter", "fitted"))
+def _run(theta0, args, max_iter, fitted):
+    return lm_solve(functools.partial(_residual, fitted=fitted), theta0, args, max_iter=max_iter)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -230,12 +288,17 @@ def evaluate(
 _attitude_jit = jax.jit(attitude)
 
 
-def compare(fit: dict, test: dict, *, sample_rate: float) -> dict:
+def compare(fit: dict, test: dict, *, sample_rate: float, offsets: bool = False) -> dict:
     """Before / two-stage / end-to-end (dip held) / end-to-end (dip fitted) on a fitting and a
     held-out trial, each a dict with ``acc``, ``mag``, ``quat`` (and ``movement``, bool).
 
-    Returns ``{"methods": {name: {"params", "dip_deg", "fit": {...}, "test": {...}}}}`` where
-    each of "fit" and "test" has the errors on quasi-static samples (reference rate below
+    ``offsets=True`` adds two diagnostic rows that ask whether a constant error of the
+    reference explains what is left: "reference_offset" (two-stage calibration, only the
+    reference's body rotation and heading offset fitted) and "end_to_end_offset" (both); they
+    are judged against the reference corrected by the fitted offset.
+
+    Returns ``{"methods": {name: {"params", "dip_deg", "offset", "fit": {...}, "test": {...}}}}``
+    where each of "fit" and "test" has the errors on quasi-static samples (reference rate below
     :data:`QUASI_STATIC_DEG_S`) and on BROAD's movement samples.
     """
     from .attitude import dip_from_data
@@ -243,26 +306,40 @@ def compare(fit: dict, test: dict, *, sample_rate: float) -> dict:
     rates = {k: rate_from_quat(d["quat"], sample_rate) for k, d in (("fit", fit), ("test", test))}
     start = two_stage(fit["acc"], fit["mag"])
     w = rate_weights(rates["fit"])
-    e2e = end_to_end(fit["acc"], fit["mag"], fit["quat"], start, weights=w, fit_dip=False)
-    e2e_dip = end_to_end(fit["acc"], fit["mag"], fit["quat"], start, weights=w, fit_dip=True)
+
+    def e2e(**flags):
+        return end_to_end(fit["acc"], fit["mag"], fit["quat"], start, weights=w, **flags)
+
+    zero = np.zeros(4)
     methods = {
-        "before": (MargParams.identity(), dip_from_data(fit["acc"], fit["mag"]), None),
-        "two_stage": (start.params, start.dip_deg, None),
-        "end_to_end": (e2e.params, e2e.dip_deg, e2e.result),
-        "end_to_end_dip": (e2e_dip.params, e2e_dip.dip_deg, e2e_dip.result),
+        "before": (MargParams.identity(), dip_from_data(fit["acc"], fit["mag"]), zero, None),
+        "two_stage": (start.params, start.dip_deg, zero, None),
     }
+    runs = {"end_to_end": e2e(), "end_to_end_dip": e2e(fit_dip=True)}
+    if offsets:
+        runs["reference_offset"] = e2e(fit_calibration=False, fit_offset=True)
+        runs["end_to_end_offset"] = e2e(fit_offset=True)
+    for name, r in runs.items():
+        methods[name] = (r.params, r.dip_deg, r.offset, r.result)
     out = {}
-    for name, (p, dip, res) in methods.items():
-        row = {"params": p, "dip_deg": float(dip)}
+    for name, (p, dip, off, res) in methods.items():
+        row = {"params": p, "dip_deg": float(dip), "offset": np.asarray(off)}
         if res is not None:
             row["status"] = int(res.status)
             row["iterations"] = int(res.iterations)
         for split, d in (("fit", fit), ("test", test)):
             qs = rates[split] < QUASI_STATIC_DEG_S
             mov = np.asarray(d.get("movement", np.ones(len(d["acc"]), bool)), bool)
+            ref = d["quat"]
+            if np.any(off != 0):
+                ok = np.all(np.isfinite(ref), axis=1)
+                fixed = np.asarray(
+                    offset_reference(jnp.asarray(np.where(ok[:, None], ref, 1.0)), jnp.asarray(off))
+                )
+                ref = np.where(ok[:, None], fixed, np.nan)
             row[split] = {
-                "quasi_static": evaluate(p, dip, d["acc"], d["mag"], d["quat"], qs),
-                "movement": evaluate(p, dip, d["acc"], d["mag"], d["quat"], mov),
+                "quasi_static": evaluate(p, dip, d["acc"], d["mag"], ref, qs),
+                "movement": evaluate(p, dip, d["acc"], d["mag"], ref, mov),
             }
         out[name] = row
     return {"methods": out, "two_stage_alignment": start.alignment_status, "start": start}

@@ -59,6 +59,11 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--step", type=int, default=10)
     ap.add_argument("--excerpt", action="store_true")
+    ap.add_argument(
+        "--offsets",
+        action="store_true",
+        help="add the rows that fit a constant offset of the optical reference",
+    )
     ap.add_argument("--out", type=Path, default=HERE / "end_to_end")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
@@ -74,17 +79,18 @@ def main() -> None:
             load(test, args.step, args.excerpt),
         )
         t0 = time.perf_counter()
-        res = ee.compare(df, dt, sample_rate=rate)
+        res = ee.compare(df, dt, sample_rate=rate, offsets=args.offsets)
         secs = time.perf_counter() - t0
         lines += table(res, fit, test)
         run = {"seconds": secs, "alignment": res["two_stage_alignment"], "methods": {}}
         for name, r in res["methods"].items():
             p = r["params"]
             run["methods"][name] = {
-                **{k: v for k, v in r.items() if k != "params"},
+                **{k: v for k, v in r.items() if k not in ("params", "offset")},
                 "hard_iron_uT": np.asarray(p.mag.hard_iron).tolist(),
                 "soft_iron": np.asarray(p.mag.soft_iron).tolist(),
                 "mag_to_acc_rotvec_deg": np.degrees(np.asarray(p.mag_to_acc.rotvec)).tolist(),
+                "reference_offset_deg": np.degrees(r["offset"]).tolist(),
             }
         out["runs"][f"{fit}->{test}"] = run
         print(f"{fit} -> {test}: {secs:.1f} s")
@@ -94,7 +100,8 @@ def main() -> None:
     (args.out / "README.md").write_text(
         "# End-to-end against two-stage calibration on BROAD\n\n"
         f"Made by `docs/end_to_end_broad.py --step {args.step}"
-        f"{' --excerpt' if args.excerpt else ''}` (every {args.step}th sample"
+        f"{' --excerpt' if args.excerpt else ''}{' --offsets' if args.offsets else ''}` "
+        f"(every {args.step}th sample"
         f"{' of the excerpts' if args.excerpt else ' of the full trials'}). "
         "RMS heading / inclination error of the Gauss-Newton attitude against the optical truth, "
         "degrees. Quasi-static: reference rate below 5 deg/s; movement: BROAD's movement "

@@ -26,13 +26,13 @@ solution, a learned model). `calib_jax.pipeline` is the library face of the tool
 calibrations are `equinox` modules (pytrees), every function is pure, works on one sensor,
 keeps the dtype of its input, and composes with `jit`, `vmap` and `grad`:
 
-| | |
-|---|---|
-| `AccelParams`, `MagParams`, `Rotation`, `MargParams` | calibrations (pytrees); `.apply(raw)` |
-| `apply(params, raw)`, `residual(params, raw, magnitude)` | calibrated samples, sphere residual |
-| `fit_accel`, `fit_mag`, `fit_batch` | fits whose parameters are differentiable in the data, weights and magnitude (implicit function theorem) |
-| `attitude(params, acc, mag, dip)` | paper 2's Gauss-Newton quaternion (body -> ENU) of every sample |
-| `propagate`, `calibrated_covariance`, `attitude_std` | the parameter covariance carried to any output |
+- `AccelParams`, `MagParams`, `Rotation`, `MargParams`: calibrations (pytrees), `.apply(raw)`;
+- `apply(params, raw)`, `residual(params, raw, magnitude)`: calibrated samples, sphere residual;
+- `fit_accel`, `fit_mag`, `fit_batch`: fits whose parameters are differentiable in the data,
+  the weights and the magnitude (implicit function theorem);
+- `attitude(params, acc, mag, dip)`: paper 2's Gauss-Newton quaternion of every sample;
+- `propagate`, `calibrated_covariance`, `attitude_std`: the parameter covariance carried to
+  any output by its Jacobian.
 
 Units and frames: `apply` returns the unit of the fit's reference magnitude, in the sensor's
 own frame (`MargParams` returns the magnetometer in the accelerometer's frame); quaternions
@@ -76,6 +76,7 @@ def directions(n):
     d = rng.normal(size=(n, 3))
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
+
 P_ACC = np.array([1.02, 0.98, 1.01, 0.01, -0.02, 0.005, 0.03, -0.01, 0.02])
 W_MAG = np.array([[1.1, 0.05, 0.02], [0.05, 0.9, -0.03], [0.02, -0.03, 1.0]])
 C_MAG = np.array([0.3, -0.2, 0.1])
@@ -92,7 +93,14 @@ fa, fm = fit_a(jnp.asarray(acc), 1.0), fit_m(jnp.asarray(mag), 1.0)
 print("accel converged:", bool(fa.converged), " rms", float(fa.rms))
 print("gains  ", np.round(np.asarray(fa.params.gains), 4), "truth", P_ACC[:3])
 print("stderr ", np.round(np.asarray(fa.stderr[:3]), 4))
-print("mag converged:", bool(fm.converged), " hard iron", np.round(np.asarray(fm.params.hard_iron), 3), "truth", C_MAG)
+print(
+    "mag converged:",
+    bool(fm.converged),
+    " hard iron",
+    np.round(np.asarray(fm.params.hard_iron), 3),
+    "truth",
+    C_MAG,
+)
 print("the Fit is a pytree with", len(jax.tree_util.tree_leaves(fa)), "leaves")
 """
 )
@@ -109,15 +117,24 @@ code(
 def gain_sum(raw, g=1.0):
     return jnp.sum(pl.fit_accel(raw, g).params.gains)
 
+
 d_raw, d_g = jax.jit(jax.grad(gain_sum, (0, 1)))(jnp.asarray(acc), 1.0)
 refit = jax.jit(gain_sum)
 h = 1e-5
 nudge = jnp.zeros_like(acc).at[7, 2].set(h)
 fd = (refit(jnp.asarray(acc) + nudge) - refit(jnp.asarray(acc) - nudge)) / (2 * h)
-print(f"d(sum gains)/d raw[7, z]: implicit {float(d_raw[7, 2]):+.6f}, refit differences {float(fd):+.6f}")
-print(f"d(sum gains)/d g: {float(d_g):+.6f} (exact law: -sum gains = {-float(gain_sum(jnp.asarray(acc))):+.6f})")
+print(
+    f"d(sum gains)/d raw[7, z]: implicit {float(d_raw[7, 2]):+.6f}, "
+    f"refit differences {float(fd):+.6f}"
+)
+print(
+    f"d(sum gains)/d g: {float(d_g):+.6f} "
+    f"(exact law: -sum gains = {-float(gain_sum(jnp.asarray(acc))):+.6f})"
+)
 # and the same derivative for a fleet of sensors in one call (vmap of grad)
-fleet = jnp.stack([jnp.asarray(acc), jnp.asarray(clean_acc + SIG_A * rng.normal(size=clean_acc.shape))])
+fleet = jnp.stack(
+    [jnp.asarray(acc), jnp.asarray(clean_acc + SIG_A * rng.normal(size=clean_acc.shape))]
+)
 print("fleet of 2: d/d raw shape", jax.jit(jax.vmap(jax.grad(gain_sum)))(fleet).shape)
 """
 )
@@ -136,32 +153,59 @@ code(
     """
 DIP = 65.0
 r_a, r_m = (np.asarray(v) for v in reference_vectors(DIP))
-poses = [np.asarray(rotvec_to_dcm(jnp.asarray(v))) for v in directions(5) * np.array([[0.3], [1], [2], [2.5], [0.8]])]
-a_test = np.asarray(distort(jnp.asarray(P_ACC), jnp.asarray(np.stack([R.T @ r_a for R in poses]))))
+poses = [
+    np.asarray(rotvec_to_dcm(jnp.asarray(v)))
+    for v in directions(5) * np.array([[0.3], [1], [2], [2.5], [0.8]])
+]
+a_test = np.asarray(
+    distort(jnp.asarray(P_ACC), jnp.asarray(np.stack([R.T @ r_a for R in poses])))
+)
 m_test = np.stack([R.T @ r_m for R in poses]) @ np.linalg.inv(W_MAG).T + C_MAG
 
 K = 200
 A = jnp.asarray(clean_acc + SIG_A * rng.normal(size=(K,) + clean_acc.shape))
 M = jnp.asarray(clean_mag + SIG_M * rng.normal(size=(K,) + clean_mag.shape))
 # weights 1/sigma^2 with absolute_sigma: the covariance is not rescaled by the reduced chi2
-fits_a = jax.jit(lambda R: pl.fit_batch(pl.fit_accel, R, 1.0, jnp.full(R.shape[:2], SIG_A**-2), absolute_sigma=True))(A)
-fits_m = jax.jit(lambda R: pl.fit_batch(pl.fit_mag, R, 1.0, jnp.full(R.shape[:2], SIG_M**-2), absolute_sigma=True))(M)
+fits_a = jax.jit(
+    lambda R: pl.fit_batch(
+        pl.fit_accel, R, 1.0, jnp.full(R.shape[:2], SIG_A**-2), absolute_sigma=True
+    )
+)(A)
+fits_m = jax.jit(
+    lambda R: pl.fit_batch(
+        pl.fit_mag, R, 1.0, jnp.full(R.shape[:2], SIG_M**-2), absolute_sigma=True
+    )
+)(M)
 rot = pl.Rotation.identity()
 
+
 def euler(pa, pm):
-    return pl.euler_deg(pl.attitude(pl.MargParams(pa, pm, rot), jnp.asarray(a_test), jnp.asarray(m_test), DIP))
+    return pl.euler_deg(
+        pl.attitude(pl.MargParams(pa, pm, rot), jnp.asarray(a_test), jnp.asarray(m_test), DIP)
+    )
+
 
 eul = np.asarray(jax.jit(jax.vmap(euler))(fits_a.params, fits_m.params))
 mc = np.std((eul - eul[:1] + 180) % 360 - 180, axis=0)
 
-first = lambda t: jax.tree_util.tree_map(lambda x: x[0], t)
+def first(t):
+    return jax.tree_util.tree_map(lambda x: x[0], t)
+
+
 one = pl.MargParams(first(fits_a.params), first(fits_m.params), rot)
 cov = pl.block_covariance(fits_a.covariance[0], fits_m.covariance[0], jnp.zeros((3, 3)))
 std = np.asarray(pl.attitude_std(one, cov, jnp.asarray(a_test), jnp.asarray(m_test), DIP))
 print("pose | roll std: propagated / Monte Carlo | pitch | yaw   (deg)")
 for k in range(5):
     print(k, " | ".join(f"{std[k, j]:.3f} / {mc[k, j]:.3f}" for j in range(3)))
-print("ratios propagated / Monte Carlo: median", np.round(np.median(std / mc), 3), " range", np.round((std / mc).min(), 2), "-", np.round((std / mc).max(), 2))
+print(
+    "ratios propagated / Monte Carlo: median",
+    np.round(np.median(std / mc), 3),
+    " range",
+    np.round((std / mc).min(), 2),
+    "-",
+    np.round((std / mc).max(), 2),
+)
 """
 )
 md(
@@ -203,21 +247,37 @@ def excerpt(trial):
     d = cj.load_broad_excerpt(trial)
     return {k: v[::STEP] for k, v in d.items()}
 
+
 rate = cj.datasets.BROAD_EXCERPT_RATE / STEP
 trials = {k: excerpt(k) for k in ("02", "05")}
 print({k: len(v["acc"]) for k, v in trials.items()}, "samples at", round(rate, 2), "Hz")
 results = {}
 for fit, test in (("02", "05"), ("05", "02")):
-    results[fit, test] = ee.compare(trials[fit], trials[test], sample_rate=rate)
+    results[fit, test] = ee.compare(trials[fit], trials[test], sample_rate=rate, offsets=True)
 
 rows = []
 for (fit, test), res in results.items():
     for name, r in res["methods"].items():
         t = r["test"]
-        rows.append((f"{fit} -> {test}", name, r["dip_deg"], t["quasi_static"]["heading_rms"], t["quasi_static"]["inclination_rms"], t["movement"]["heading_rms"], t["movement"]["inclination_rms"]))
-print(f"{'fit -> held out':16s} {'method':15s} {'dip':>5s} | quasi-static heading  incl. | movement heading  incl.   (RMS deg, held-out trial)")
+        rows.append(
+            (
+                f"{fit} -> {test}",
+                name,
+                r["dip_deg"],
+                t["quasi_static"]["heading_rms"],
+                t["quasi_static"]["inclination_rms"],
+                t["movement"]["heading_rms"],
+                t["movement"]["inclination_rms"],
+            )
+        )
+print(
+    f"{'fit -> held out':16s} {'method':15s} {'dip':>5s} | quasi-static heading  incl. "
+    "| movement heading  incl.   (RMS deg, held-out trial)"
+)
 for r in rows:
-    print(f"{r[0]:16s} {r[1]:15s} {r[2]:5.1f} | {r[3]:21.2f} {r[4]:6.2f} | {r[5]:16.2f} {r[6]:6.2f}")
+    print(
+        f"{r[0]:16s} {r[1]:15s} {r[2]:5.1f} | {r[3]:21.2f} {r[4]:6.2f} | {r[5]:16.2f} {r[6]:6.2f}"
+    )
 """
 )
 md(
@@ -237,6 +297,13 @@ comparison on the full-rate trials):
   movement: it absorbs an error of the estimator, not of the sensors.
 - **During movement nothing changes much.** The 8-9 deg heading RMS there is the estimator's
   tilt error under acceleration (see above), not calibration.
+- **A constant error of the reference does not explain the rest either.** `reference_offset`
+  fits only a fixed rotation between the optical marker frame and the IMU and a heading offset
+  of the optical north (two-stage calibration kept); `end_to_end_offset` fits them with the
+  calibration. Judged against the corrected reference, they do little more than the rows
+  above: 2-3 deg of quasi-static heading error stays unexplained by anything modelled here
+  (candidates not modelled: a field that is not uniform over the tracked volume, reference
+  timing, soft iron that depends on motion).
 - **Calibration uncertainty explains only part of what is left.** Below, the two-stage
   covariance propagated to roll, pitch and yaw of every held-out sample gives the
   calibration's own share of the error; compare its yaw with the 2-4 deg of heading error
@@ -250,14 +317,31 @@ start = res["start"]
 d = trials["05"]
 ok = np.all(np.isfinite(d["quat"]), axis=1)
 idx = np.flatnonzero(ok)[:: max(1, 20 // STEP)]
-std = np.asarray(pl.attitude_std(start.params, jnp.asarray(start.covariance), jnp.asarray(d["acc"][idx]), jnp.asarray(d["mag"][idx]), start.dip_deg))
-print(f"two-stage (fit on 02): propagated std on trial 05, median roll {np.median(std[:, 0]):.3f}, pitch {np.median(std[:, 1]):.3f}, yaw {np.median(std[:, 2]):.3f} deg")
+std = np.asarray(
+    pl.attitude_std(
+        start.params,
+        jnp.asarray(start.covariance),
+        jnp.asarray(d["acc"][idx]),
+        jnp.asarray(d["mag"][idx]),
+        start.dip_deg,
+    )
+)
+print(
+    "two-stage (fit on 02): propagated std on trial 05, median roll "
+    f"{np.median(std[:, 0]):.3f}, pitch {np.median(std[:, 1]):.3f}, "
+    f"yaw {np.median(std[:, 2]):.3f} deg"
+)
 
 t = np.arange(len(d["acc"])) / rate
 fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
 for name in ("two_stage", "end_to_end"):
     r = res["methods"][name]
-    q = ee._attitude_jit(r["params"], jnp.asarray(d["acc"][ok]), jnp.asarray(d["mag"][ok]), jnp.asarray(r["dip_deg"]))
+    q = ee._attitude_jit(
+        r["params"],
+        jnp.asarray(d["acc"][ok]),
+        jnp.asarray(d["mag"][ok]),
+        jnp.asarray(r["dip_deg"]),
+    )
     e = np.asarray(ee.attitude_errors(q, jnp.asarray(d["quat"][ok])))
     ax[0].plot(t[ok], e[:, 0], ".", ms=1.5, label=name)
     ax[1].plot(t[ok], e[:, 1], ".", ms=1.5, label=name)
@@ -285,7 +369,11 @@ for pipelines that run the calibrated model on a float32 device.
 code(
     """
 f32 = fit_a(jnp.asarray(acc, jnp.float32), jnp.float32(1.0))
-print(f32.params.gains.dtype, "max |float32 - float64| of the nine parameters:", float(jnp.max(jnp.abs(f32.params.to_vector() - fa.params.to_vector()))))
+print(
+    f32.params.gains.dtype,
+    "max |float32 - float64| of the nine parameters:",
+    float(jnp.max(jnp.abs(f32.params.to_vector() - fa.params.to_vector()))),
+)
 """
 )
 
