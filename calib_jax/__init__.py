@@ -13,8 +13,13 @@ Public API (re-exports only; each concept lives in its own module):
 - :mod:`calib_jax.static`: static-interval detection.
 - :mod:`calib_jax.io`: log loaders.
 - :mod:`calib_jax.simulate`: logs with known truth.
+- :mod:`calib_jax.pipeline`: the library face for JAX pipelines: calibrations as equinox
+  pytrees, ``apply``/``residual``/``fit_accel``/``fit_mag``/``fit_batch``/``attitude``,
+  implicit gradients through the fits, covariance propagated to samples and roll/pitch/yaw.
+- :mod:`calib_jax.endtoend`: calibration against a reference attitude (BROAD's optical truth).
 """
 
+from . import pipeline
 from .accel import calibrate_accel, fit_normalized, initial_guess
 from .align import align_mag_to_accel, plane_alignment
 from .attitude import estimate_attitude, gauss_newton_quaternion
@@ -31,6 +36,7 @@ from .static import StaticReport, detect_static
 __version__ = "0.1.0"
 
 __all__ = [
+    "pipeline",
     "solve_implicit",
     "MagCalibration",
     "align_mag_to_accel",
