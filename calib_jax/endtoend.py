@@ -145,8 +145,11 @@ def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
     The accelerometer is used as given."""
     acc = np.asarray(acc, float)
     mag = np.asarray(mag, float)
-    fit = jax.jit(fit_mag)(jnp.asarray(mag), 1.0)
-    m = np.asarray(fit.params.apply(jnp.asarray(mag)))
+    ok = np.all(np.isfinite(mag), axis=1)  # NaN rows: zero weight and a finite stand-in
+    fit = jax.jit(fit_mag)(
+        jnp.asarray(np.where(ok[:, None], mag, 0.0)), 1.0, jnp.asarray(ok, float)
+    )
+    m = np.asarray(fit.params.apply(jnp.asarray(mag)))  # NaN rows stay NaN; align drops them
     al = align_mag_to_accel(acc, m, search_permutations=False)
     rot = Rotation(jnp.asarray(_rotvec(al.R_acc_from_mag)))
     from .models.accel import AccelParams
@@ -199,7 +202,11 @@ def end_to_end(
     ok = np.all(np.isfinite(quat_ref), axis=1) & np.all(np.isfinite(acc), axis=1)
     ok &= np.all(np.isfinite(mag), axis=1)
     w = np.where(ok, 1.0 if weights is None else np.asarray(weights, float), 0.0)
+    # rows left out get harmless finite stand-ins (a zero weight does not stop NaN: 0 * NaN)
     q_ref = np.where(ok[:, None], quat_ref, np.array([1.0, 0, 0, 0]))
+    q_ref = q_ref / np.linalg.norm(q_ref, axis=1, keepdims=True)
+    acc = np.where(ok[:, None], acc, np.array([0.0, 0.0, 1.0]))
+    mag = np.where(ok[:, None], mag, np.array([0.0, 1.0, 0.0]))
     if ok.sum() < 50:
         raise ValueError(f"only {int(ok.sum())} samples have a finite reference attitude")
     fitted = tuple(
@@ -274,8 +281,10 @@ def evaluate(
 ) -> dict[str, float]:
     """RMS and median heading and inclination error (deg) over the samples in ``mask``."""
     k = np.asarray(mask, bool) & np.all(np.isfinite(quat_ref), axis=1)
+    k &= np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
     q = _attitude_jit(params, jnp.asarray(acc[k]), jnp.asarray(mag[k]), jnp.asarray(dip_deg))
-    e = np.asarray(attitude_errors(q, jnp.asarray(quat_ref[k])))
+    ref = quat_ref[k] / np.linalg.norm(quat_ref[k], axis=1, keepdims=True)
+    e = np.asarray(attitude_errors(q, jnp.asarray(ref)))
     return {
         "n": int(k.sum()),
         "heading_rms": float(np.sqrt(np.mean(e[:, 0] ** 2))),

@@ -119,3 +119,24 @@ def test_broad_end_to_end_lowers_the_attitude_error(broad):
     # the calibrated field keeps unit mean norm (the scale the estimator cannot see)
     m = np.linalg.norm(np.asarray(pl.apply(fit.params.mag, jnp.asarray(broad["mag"]))), axis=1)
     assert abs(np.mean(m[np.all(np.isfinite(broad["quat"]), axis=1)] * 1.0) - 1.0) < 0.02
+
+
+def test_missing_rows_are_left_out_not_propagated():
+    """NaN rows in acc, mag or the reference get zero weight and finite stand-ins (0 * NaN is
+    NaN, so a weight alone would poison the whole fit): the fit equals the one without them."""
+    acc, mag, q_ref, _ = _simulated(n=120, seed=2)
+    start = ee.two_stage(acc, mag)
+    clean = ee.end_to_end(acc, mag, q_ref, start)
+    a2, m2, q2 = acc.copy(), mag.copy(), q_ref.copy()
+    a2[5] = np.nan
+    m2[17, 1] = np.nan
+    q2[40] = np.nan
+    keep = np.ones(len(acc), bool)
+    keep[[5, 17, 40]] = False
+    start2 = ee.two_stage(a2, m2)
+    holed = ee.end_to_end(a2, m2, q2, start2)
+    ref = ee.end_to_end(acc[keep], mag[keep], q_ref[keep], start2)
+    assert holed.result.success and clean.result.success
+    np.testing.assert_allclose(
+        ee.pack(holed.params, 0.0), ee.pack(ref.params, 0.0), rtol=1e-7, atol=1e-9
+    )

@@ -98,6 +98,24 @@ def test_bad_input_says_what_to_change():
         pl.fit_accel(jnp.zeros((20, 2)))
     with pytest.raises(ValueError, match="record >= 10"):
         pl.fit_mag(jnp.asarray(MAG[:5]))
+    with pytest.raises(ValueError, match="one per sample"):
+        pl.fit_accel(jnp.asarray(ACC), 1.0, jnp.ones(N_ACC + 1))
+    with pytest.raises(ValueError, match="magnitude must be a scalar"):
+        pl.fit_accel(jnp.asarray(ACC), jnp.ones(2))
+    with pytest.raises(ValueError, match=r"\(S, N, 3\)"):
+        pl.fit_batch(pl.fit_accel, jnp.asarray(ACC))
+
+
+def test_integer_counts_keep_a_float_magnitude(fits):
+    """Raw int16-like counts: the fleet fit must not truncate 9.80665 to the data's dtype."""
+    counts = jnp.asarray(np.round(ACC * 2000.0).astype(np.int32))[None]
+    fb = pl.fit_batch(pl.fit_accel, counts, 9.80665)
+    a = pl.apply(jax.tree_util.tree_map(lambda x: x[0], fb.params), counts[0].astype(float))
+    assert abs(float(jnp.mean(jnp.linalg.norm(a, axis=1))) - 9.80665) < 0.01
+    # and every calibration has the same apply method
+    np.testing.assert_allclose(
+        fits[0].params.apply(jnp.asarray(ACC)), pl.apply(fits[0].params, jnp.asarray(ACC))
+    )
 
 
 def test_not_converged_is_reported():
@@ -369,22 +387,23 @@ def test_covariance_to_roll_pitch_yaw(monte_carlo):
 
 
 def test_float32_runs_with_documented_accuracy(fits):
-    """float32 fits converge (at float32 round-off) to the float64 optimum within 1e-4 of the
-    gains (README: "float32: 1e-4"), the implicit derivative within 1e-2 of its scale, and
-    the attitude through them within 1e-2 deg."""
+    """float32 in, float32 out. The fits (on data normalised to unit scale) converge at float32
+    round-off to the float64 optimum: parameters within 1e-5 (measured 9e-8; eps32 is 1.2e-7),
+    implicit derivatives within 1e-4 of their scale (measured 4e-7), roll/pitch/yaw through
+    them within 1e-3 deg (measured 2.4e-5). The README quotes these bounds."""
     fa, fm = fits
     a32, m32 = jnp.asarray(ACC, jnp.float32), jnp.asarray(MAG, jnp.float32)
     fa32 = FIT_A(a32, jnp.float32(1.0))
     fm32 = FIT_M(m32, jnp.float32(1.0))
     assert fa32.params.gains.dtype == jnp.float32 and fm32.params.soft_iron.dtype == jnp.float32
     assert bool(fa32.converged) and bool(fm32.converged)
-    np.testing.assert_allclose(fa32.params.to_vector(), fa.params.to_vector(), atol=1e-4)
+    np.testing.assert_allclose(fa32.params.to_vector(), fa.params.to_vector(), atol=1e-5)
     flat32 = ravel_pytree(fm32.params)[0]
-    np.testing.assert_allclose(flat32, ravel_pytree(fm.params)[0], atol=1e-4)
+    np.testing.assert_allclose(flat32, ravel_pytree(fm.params)[0], atol=1e-5)
     g32 = jax.jit(jax.grad(_gain_sum))(a32, jnp.float32(1.0))
     g64 = jax.jit(jax.grad(_gain_sum))(jnp.asarray(ACC), 1.0)
     assert g32.dtype == jnp.float32
-    np.testing.assert_allclose(g32, g64, atol=1e-2 * float(jnp.abs(g64).max()))
+    np.testing.assert_allclose(g32, g64, atol=1e-4 * float(jnp.abs(g64).max()))
     mp32 = pl.MargParams(fa32.params, fm32.params, pl.Rotation.identity(jnp.float32))
     e32 = pl.euler_deg(
         pl.attitude(
@@ -397,4 +416,4 @@ def test_float32_runs_with_documented_accuracy(fits):
     mp64 = pl.MargParams(fa.params, fm.params, pl.Rotation.identity())
     e64 = pl.euler_deg(pl.attitude(mp64, jnp.asarray(A_TEST), jnp.asarray(M_TEST), DIP))
     assert e32.dtype == jnp.float32
-    np.testing.assert_allclose(e32, e64, atol=1e-2)
+    np.testing.assert_allclose(e32, e64, atol=1e-3)

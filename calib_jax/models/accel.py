@@ -61,6 +61,10 @@ class AccelParams(eqx.Module):
         """The symmetric gain/non-orthogonality matrix alpha."""
         return alpha_matrix(self.to_vector())
 
+    def apply(self, raw: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """Calibrated acceleration alpha^-1 (a' - beta), in the reference magnitude's unit."""
+        return (raw - self.bias) @ inv3(self.alpha).T
+
     @classmethod
     def identity(cls, dtype=jnp.float64) -> AccelParams:
         """Unit gains, no cross terms, no bias (a reference point, never a fit result)."""
