@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 from pathlib import Path
 
 import jax
@@ -39,6 +40,49 @@ class Tol:
     # Parameter recovery: estimates should lie within a few standard errors of the truth
     # (5 sigma: a false alarm rate of ~6e-7 per parameter).
     N_SIGMA = 5.0
+
+
+def _mapped_regions() -> int | None:
+    try:
+        with open("/proc/self/maps") as f:
+            return sum(1 for _ in f)
+    except OSError:  # not Linux
+        return None
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _release_compiled_code():
+    """Free every compiled XLA executable after each test module.
+
+    Each executable keeps about nine memory maps (its JIT-compiled code and data) for as long as
+    a jit cache holds it, and module-level ``jax.jit`` objects hold theirs for the whole run.
+    The full suite compiles thousands of functions: in one process it reached Linux's
+    ``vm.max_map_count`` (65,530) and LLVM segfaulted inside a compile (CI exit 139, in
+    tests/test_pipeline.py). ``jax.clear_caches()`` drops them; a module's own shared compiles
+    (module-scoped fixtures, module-level jits) still serve all of its tests.
+    """
+    yield
+    n = _mapped_regions()
+    if n is not None:
+        _PEAK_MAPS[0] = max(_PEAK_MAPS[0], n)
+    jax.clear_caches()
+    gc.collect()
+
+
+_PEAK_MAPS = [0]
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The most memory maps one module left behind, against the limit that crashed CI."""
+    try:
+        limit = int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return
+    if _PEAK_MAPS[0]:
+        terminalreporter.write_line(
+            f"memory maps at the end of the busiest test module: {_PEAK_MAPS[0]} "
+            f"(vm.max_map_count {limit}; caches are cleared after every module)"
+        )
 
 
 @pytest.fixture(scope="session")
