@@ -387,23 +387,29 @@ def test_covariance_to_roll_pitch_yaw(monte_carlo):
 
 
 def test_float32_runs_with_documented_accuracy(fits):
-    """float32 in, float32 out. The fits (on data normalised to unit scale) converge at float32
-    round-off to the float64 optimum: parameters within 1e-5 (measured 9e-8; eps32 is 1.2e-7),
-    implicit derivatives within 1e-4 of their scale (measured 4e-7), roll/pitch/yaw through
-    them within 1e-3 deg (measured 2.4e-5). The README quotes these bounds."""
+    """float32 in, float32 out. The fits (on data normalised to unit scale) stop at float32
+    round-off near the float64 optimum, at a point that depends on the data's rounding, so the
+    bounds come from 40 simulated boards like this one (benchmarks/float32_accuracy.py,
+    largest difference over them in brackets; this test's board lands closer):
+    parameters within 3 % of their standard error (1 %, 8.4e-6 absolute), the implicit
+    derivative within 3e-4 of its scale (5.2e-5), roll/pitch/yaw within 5e-3 deg (1.8e-3).
+    The README quotes these bounds."""
     fa, fm = fits
     a32, m32 = jnp.asarray(ACC, jnp.float32), jnp.asarray(MAG, jnp.float32)
     fa32 = FIT_A(a32, jnp.float32(1.0))
     fm32 = FIT_M(m32, jnp.float32(1.0))
     assert fa32.params.gains.dtype == jnp.float32 and fm32.params.soft_iron.dtype == jnp.float32
     assert bool(fa32.converged) and bool(fm32.converged)
-    np.testing.assert_allclose(fa32.params.to_vector(), fa.params.to_vector(), atol=1e-5)
-    flat32 = ravel_pytree(fm32.params)[0]
-    np.testing.assert_allclose(flat32, ravel_pytree(fm.params)[0], atol=1e-5)
+    d_acc = np.abs(np.asarray(fa32.params.to_vector()) - np.asarray(fa.params.to_vector()))
+    assert np.all(d_acc < 0.03 * np.asarray(fa.stderr)), d_acc / np.asarray(fa.stderr)
+    d_mag = np.abs(
+        np.asarray(ravel_pytree(fm32.params)[0]) - np.asarray(ravel_pytree(fm.params)[0])
+    )
+    assert np.all(d_mag < 0.03 * np.asarray(fm.stderr)), d_mag / np.asarray(fm.stderr)
     g32 = jax.jit(jax.grad(_gain_sum))(a32, jnp.float32(1.0))
     g64 = jax.jit(jax.grad(_gain_sum))(jnp.asarray(ACC), 1.0)
     assert g32.dtype == jnp.float32
-    np.testing.assert_allclose(g32, g64, atol=1e-4 * float(jnp.abs(g64).max()))
+    np.testing.assert_allclose(g32, g64, atol=3e-4 * float(jnp.abs(g64).max()))
     mp32 = pl.MargParams(fa32.params, fm32.params, pl.Rotation.identity(jnp.float32))
     e32 = pl.euler_deg(
         pl.attitude(
@@ -416,4 +422,4 @@ def test_float32_runs_with_documented_accuracy(fits):
     mp64 = pl.MargParams(fa.params, fm.params, pl.Rotation.identity())
     e64 = pl.euler_deg(pl.attitude(mp64, jnp.asarray(A_TEST), jnp.asarray(M_TEST), DIP))
     assert e32.dtype == jnp.float32
-    np.testing.assert_allclose(e32, e64, atol=1e-3)
+    np.testing.assert_allclose(e32, e64, atol=5e-3)
