@@ -17,8 +17,12 @@ unrolled LM loop and against optimistix's implicit adjoint.
 
 At a fit that did not converge, F(p, d) != 0 and the rule describes a point that is not the
 returned one: the derivative is that of the optimum near it, not of what the solver returned.
-The ``status`` of the forward solve says which case you are in; check it (outside jit) before
-trusting a gradient. Where the Hessian is singular (a parameter the data do not determine)
+Its error is first order in the distance to the optimum (on the 40-pose accelerometer of
+``tests/test_implicit.py``, about eight times that distance relative to the derivative's
+scale: 3 % after one LM iteration, 2e-4 after two), while forward mode through the same
+iterations, the derivative of the returned point, is off by 14 %. The ``status`` of the
+forward solve says which case you are in; check it (outside jit) before trusting a
+gradient. Where the Hessian is singular (a parameter the data do not determine)
 the derivative is NaN or inf, as the standard error is.
 """
 

@@ -117,47 +117,32 @@ def test_weights_are_differentiable():
     np.testing.assert_allclose(Jw[:, 5], fd, atol=5e-4 * np.abs(fd).max())
 
 
-def test_unconverged_fit_says_so():
-    """With a budget of one iteration the forward status is not converged; the derivative is
-    that of the optimum near the point (documented), so the status is what to check."""
-    p, res = solve_implicit(resid, P0 * 1.05, (X, 1.0), max_iter=1, eps1=0.0, eps2=0.0)
-    assert int(res.status) == Status.MAX_ITERATIONS
+def test_unconverged_fit_says_so(J):
+    """With a budget of one iteration the forward status is not converged, and the implicit
+    derivative is that of the optimum near the point: its error is first order in the
+    distance to the optimum (8.1-8.4 times it, relative to the derivative's scale, after 1, 2
+    and 3 iterations here; bound 20), and it is not the derivative of the returned iterate
+    (forward mode through those iterations), which differs from it by 0.1 of the scale after
+    one iteration. So the status is what to check."""
+    p_star = np.asarray(implicit(X, 1.0))
+    scale = np.abs(J).max()
+    errors = []
+    for iters in (1, 2):
 
+        def fit(x, iters=iters):
+            return solve_implicit(resid, P0 * 1.05, (x, 1.0), max_iter=iters, eps1=0.0, eps2=0.0)
 
-def test_effect_hyperparameter_reference_temperature():
-    """An effect hyperparameter: the reference temperature T_ref of the temperature-bias effect
-    of the diagnosis model, b(T) = b + c1 (T - T_ref) + c2 (T - T_ref)^2. Moving T_ref only
-    re-expresses the same curve, so the exact law is db/dT_ref = c1, dc1/dT_ref = 2 c2,
-    dc2/dT_ref = 0, and the gains do not move (1e-8 of scale); and refit differences agree."""
-    from calib_jax.diagnose import model as dm
-
-    rng = np.random.default_rng(5)
-    n = 80
-    u = rng.normal(size=(n, 3))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    T = rng.uniform(-0.5, 0.5, n)
-    c1, c2 = np.array([0.02, -0.01, 0.015]), np.array([0.01, 0.02, -0.01])
-    x = u @ np.diag([1.02, 0.99, 1.01]) + 0.01 + c1 * T[:, None] + c2 * T[:, None] ** 2
-    x += 1e-4 * rng.normal(size=x.shape)
-    free = jnp.asarray(dm.mask("temp_bias1", "temp_bias2"))
-    theta0 = jnp.zeros(dm.N_THETA).at[0:3].set(1.0)
-
-    def resid(theta, args):
-        x, T, Tref, free = args
-        return dm.residual(theta, (x, jnp.zeros_like(T), T - Tref, jnp.ones_like(T), free))
-
-    def fitted(Tref):
-        return solve_implicit(
-            resid, theta0, (jnp.asarray(x), jnp.asarray(T), Tref, free), max_iter=100
-        )[0]
-
-    th = jax.jit(fitted)(0.1)
-    d = np.asarray(jax.jit(jax.jacfwd(fitted))(0.1))
-    s = dm.SLOTS
-    np.testing.assert_allclose(d[s["bias"]], np.asarray(th[s["temp_bias1"]]), atol=1e-8)
-    np.testing.assert_allclose(d[s["temp_bias1"]], 2 * np.asarray(th[s["temp_bias2"]]), atol=1e-8)
-    np.testing.assert_allclose(d[s["temp_bias2"]], 0.0, atol=1e-8)
-    np.testing.assert_allclose(d[s["gains"]], 0.0, atol=1e-8)
-    f = jax.jit(fitted)
-    fd = (np.asarray(f(0.1 + 1e-4)) - np.asarray(f(0.1 - 1e-4))) / 2e-4
-    np.testing.assert_allclose(d, fd, atol=1e-5)
+        p, res = jax.jit(fit)(X)
+        assert int(res.status) == Status.MAX_ITERATIONS
+        dist = np.abs(np.asarray(p) - p_star).max()
+        err = np.abs(np.asarray(jax.jit(jax.jacfwd(lambda x: fit(x)[0]))(X)) - J).max() / scale
+        assert err < 20 * dist, (iters, err, dist)
+        errors.append(err)
+    assert errors[1] < 0.1 * errors[0]  # falls with the distance
+    # the derivative of the returned iterate itself is another thing
+    Ju = jax.jit(
+        jax.jacfwd(
+            lambda x: lm_solve(resid, P0 * 1.05, (x, 1.0), max_iter=1, eps1=0.0, eps2=0.0).params
+        )
+    )(X)
+    assert np.abs(np.asarray(Ju) - J).max() / scale > 2 * errors[0]
