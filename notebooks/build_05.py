@@ -141,6 +141,59 @@ print("fleet of 2: d/d raw shape", jax.jit(jax.vmap(jax.grad(gain_sum)))(fleet).
 
 md(
     """
+**Implicit against unrolled.** Forward mode through the LM iterations differentiates the
+iterate the solver returned; the implicit rule differentiates the optimum. At convergence the
+two agree. Stop the fit early and they part: the implicit derivative is still the optimum's,
+wrong to first order in the distance to it, while the unrolled one is the derivative of a
+point that is not the optimum. That is why `Fit.status` (or `Fit.converged`) is the thing to
+check before trusting a gradient. Here with the low-level pieces (`solve_implicit`,
+`lm_solve`), from a start 5 % off; the last row, run to convergence, is the reference the
+errors are measured against:
+"""
+)
+code(
+    """
+import functools
+
+from calib_jax.accel import initial_guess
+from calib_jax.implicit import solve_implicit
+from calib_jax.lm import lm_solve
+from calib_jax.models.accel import normalized_sphere_residual
+
+
+def resid(p, args):
+    return normalized_sphere_residual(p, *args)
+
+
+x = jnp.asarray(acc)
+p0 = 1.05 * initial_guess(x, jnp.ones(len(x)))
+
+
+@functools.partial(jax.jit, static_argnames="iters")
+def early_stop(x, iters):
+    stop = {} if iters is None else dict(max_iter=iters, eps1=0.0, eps2=0.0)
+    p_k, res_k = solve_implicit(resid, p0, (x, 1.0), **stop)
+    J_imp = jax.jacfwd(lambda x: solve_implicit(resid, p0, (x, 1.0), **stop)[0])(x)
+    J_unr = jax.jacfwd(lambda x: lm_solve(resid, p0, (x, 1.0), **stop).params)(x)
+    return p_k, res_k.iterations, J_imp, J_unr
+
+
+p_opt, _, J_opt, _ = early_stop(x, None)  # run to convergence: the reference
+scale = float(jnp.abs(J_opt).max())
+print("LM iterations | distance to optimum | implicit error | unrolled error (of the scale)")
+for iters in (1, 2, None):
+    p_k, n_k, J_imp, J_unr = early_stop(x, iters)
+    print(
+        f"{int(n_k):>13} | {float(jnp.abs(p_k - p_opt).max()):19.1e} | "
+        f"{float(jnp.abs(J_imp - J_opt).max()) / scale:14.1e} | "
+        f"{float(jnp.abs(J_unr - J_opt).max()) / scale:.1e}",
+        "(converged)" if iters is None else "",
+    )
+"""
+)
+
+md(
+    """
 ## 2. Uncertainty to the outputs
 
 `Fit.covariance` is over the flattened parameter pytree. `attitude_std` carries it through
