@@ -73,8 +73,8 @@ def main(argv=None):
     a_test = np.asarray(distort(jnp.asarray(P_ACC), jnp.asarray(np.stack([R.T @ r_a for R in Rs]))))
     m_test = np.stack([R.T @ r_m for R in Rs]) @ np.linalg.inv(W_MAG).T + C_MAG
 
-    rows = {k: [] for k in ("acc_per_stderr", "mag_per_stderr", "acc_abs", "mag_abs", "grad_rel")}
-    rows["euler_deg"] = []
+    quantities = ("acc_per_stderr", "mag_per_stderr", "acc_abs", "mag_abs", "grad_rel", "euler_deg")
+    rows = {k: [] for k in quantities}
     not_converged = 0
     for seed in range(args.boards):
         acc, mag = _board(np.random.default_rng(seed))

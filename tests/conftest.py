@@ -42,6 +42,9 @@ class Tol:
     N_SIGMA = 5.0
 
 
+_PEAK_MAPS = [0]  # the most maps any module left behind (reported at the end of the run)
+
+
 def _mapped_regions() -> int | None:
     try:
         with open("/proc/self/maps") as f:
@@ -67,9 +70,6 @@ def _release_compiled_code():
         _PEAK_MAPS[0] = max(_PEAK_MAPS[0], n)
     jax.clear_caches()
     gc.collect()
-
-
-_PEAK_MAPS = [0]
 
 
 def pytest_terminal_summary(terminalreporter):
