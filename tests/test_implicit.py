@@ -146,3 +146,42 @@ def test_unconverged_fit_says_so(J):
         )
     )(X)
     assert np.abs(np.asarray(Ju) - J).max() / scale > 2 * errors[0]
+
+
+def test_effect_hyperparameter_reference_temperature():
+    """An effect hyperparameter: the reference temperature T_ref of the temperature-bias effect
+    of the diagnosis model, b(T) = b + c1 (T - T_ref) + c2 (T - T_ref)^2. Moving T_ref only
+    re-expresses the same curve, so the exact law is db/dT_ref = c1, dc1/dT_ref = 2 c2,
+    dc2/dT_ref = 0, and the gains do not move (1e-8 of scale); and refit differences agree."""
+    from calib_jax.diagnose import model as dm
+
+    rng = np.random.default_rng(5)
+    n = 80
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    T = rng.uniform(-0.5, 0.5, n)
+    c1, c2 = np.array([0.02, -0.01, 0.015]), np.array([0.01, 0.02, -0.01])
+    x = u @ np.diag([1.02, 0.99, 1.01]) + 0.01 + c1 * T[:, None] + c2 * T[:, None] ** 2
+    x += 1e-4 * rng.normal(size=x.shape)
+    free = jnp.asarray(dm.mask("temp_bias1", "temp_bias2"))
+    theta0 = jnp.zeros(dm.N_THETA).at[0:3].set(1.0)
+
+    def resid(theta, args):
+        x, T, Tref, free = args
+        return dm.residual(theta, (x, jnp.zeros_like(T), T - Tref, jnp.ones_like(T), free))
+
+    def fitted(Tref):
+        return solve_implicit(
+            resid, theta0, (jnp.asarray(x), jnp.asarray(T), Tref, free), max_iter=100
+        )[0]
+
+    th = jax.jit(fitted)(0.1)
+    d = np.asarray(jax.jit(jax.jacfwd(fitted))(0.1))
+    s = dm.SLOTS
+    np.testing.assert_allclose(d[s["bias"]], np.asarray(th[s["temp_bias1"]]), atol=1e-8)
+    np.testing.assert_allclose(d[s["temp_bias1"]], 2 * np.asarray(th[s["temp_bias2"]]), atol=1e-8)
+    np.testing.assert_allclose(d[s["temp_bias2"]], 0.0, atol=1e-8)
+    np.testing.assert_allclose(d[s["gains"]], 0.0, atol=1e-8)
+    f = jax.jit(fitted)
+    fd = (np.asarray(f(0.1 + 1e-4)) - np.asarray(f(0.1 - 1e-4))) / 2e-4
+    np.testing.assert_allclose(d, fd, atol=1e-5)
