@@ -76,9 +76,9 @@ def main(argv=None):
     quantities = ("acc_per_stderr", "mag_per_stderr", "acc_abs", "mag_abs", "grad_rel", "euler_deg")
     rows = {k: [] for k in quantities}
     not_converged = 0
+    f32 = jnp.float32
     for seed in range(args.boards):
         acc, mag = _board(np.random.default_rng(seed))
-        f32 = jnp.float32
         a64, a32 = fit_a(jnp.asarray(acc), 1.0), fit_a(jnp.asarray(acc, f32), f32(1.0))
         m64, m32 = fit_m(jnp.asarray(mag), 1.0), fit_m(jnp.asarray(mag, f32), f32(1.0))
         not_converged += (not bool(a32.converged)) + (not bool(m32.converged))

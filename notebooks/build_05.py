@@ -172,10 +172,14 @@ p0 = 1.05 * initial_guess(x, jnp.ones(len(x)))
 @functools.partial(jax.jit, static_argnames="iters")
 def early_stop(x, iters):
     stop = {} if iters is None else dict(max_iter=iters, eps1=0.0, eps2=0.0)
-    p_k, res_k = solve_implicit(resid, p0, (x, 1.0), **stop)
-    J_imp = jax.jacfwd(lambda x: solve_implicit(resid, p0, (x, 1.0), **stop)[0])(x)
+
+    def fit(x):
+        p, res = solve_implicit(resid, p0, (x, 1.0), **stop)
+        return p, (p, res.iterations)
+
+    J_imp, (p_k, n_k) = jax.jacfwd(fit, has_aux=True)(x)  # one forward solve for both
     J_unr = jax.jacfwd(lambda x: lm_solve(resid, p0, (x, 1.0), **stop).params)(x)
-    return p_k, res_k.iterations, J_imp, J_unr
+    return p_k, n_k, J_imp, J_unr
 
 
 p_opt, _, J_opt, _ = early_stop(x, None)  # run to convergence: the reference
