@@ -23,6 +23,7 @@ from . import pipeline
 from .accel import calibrate_accel, fit_normalized, initial_guess
 from .align import align_mag_to_accel, plane_alignment
 from .attitude import estimate_attitude, gauss_newton_quaternion
+from .batch import BatchResult, calibrate_accel_batch, calibrate_mag_batch
 from .calibration import AccelCalibration, MagCalibration
 from .datasets import broad_excerpt_path, demo_log_path, load_broad_excerpt, mag_demo_log_path
 from .implicit import solve_implicit
@@ -37,6 +38,9 @@ __version__ = "0.1.0"
 
 __all__ = [
     "pipeline",
+    "BatchResult",
+    "calibrate_accel_batch",
+    "calibrate_mag_batch",
     "solve_implicit",
     "MagCalibration",
     "align_mag_to_accel",

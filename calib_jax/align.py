@@ -288,6 +288,12 @@ def align_mag_to_accel(
         changes sign), so without it the permutation with det +1 is preferred, which is right
         unless the magnetometer's frame is left-handed against the accelerometer's.
     """
+    for name, v in (("acc", acc), ("mag", mag)):
+        if hasattr(v, "apply") and not hasattr(v, "__array__"):
+            raise TypeError(
+                f"align_mag_to_accel takes calibrated samples, got a {type(v).__name__} as "
+                f"{name}; pass its output instead, e.g. {name}_cal.apply(raw_{name})"
+            )
     acc = np.asarray(acc, float)
     mag = np.asarray(mag, float)
     if acc.shape != mag.shape or acc.ndim != 2 or acc.shape[1] != 3:
