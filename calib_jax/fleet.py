@@ -64,8 +64,12 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
         try:
             x, m, info = prepare(p, sensor, columns)
             prepared.append((p, x, m, info))
-        except (ValueError, OSError) as exc:
-            out.append({"path": str(p), "status": "load_error", "message": str(exc)})
+        except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
+            # ValueError/OSError carry a message meant for the user; anything else is a bug in
+            # reading this file, reported with its type instead of aborting the other files
+            known = isinstance(exc, ValueError | OSError)
+            msg = str(exc) if known else f"{type(exc).__name__} while reading {p}: {exc}"
+            out.append({"path": str(p), "status": "load_error", "message": msg})
     if prepared:
         n = bucket(max(len(x) for _, x, _, _ in prepared))
         raw = np.zeros((len(prepared), n, 3))

@@ -51,6 +51,27 @@ def test_streamed_results_match_calibrate_accel_on_samples(fleet_dir):
             assert np.all(np.abs(p - truth[r["path"]]) < 5 * np.array(r["stderr"]))
 
 
+def test_an_unexpected_error_in_one_file_is_that_files_entry(fleet_dir, monkeypatch):
+    """Any exception while reading one file (here an IndexError, as a --columns mapping wider
+    than the file once raised) becomes that file's load_error entry; the others are fitted."""
+    import calib_jax.fleet as fleet
+
+    d, truth = fleet_dir
+    paths = sorted(truth)[:2]
+    real = fleet.load_log
+
+    def flaky(path, **kw):
+        if path == paths[0]:
+            raise IndexError("index 7 is out of bounds for axis 1 with size 4")
+        return real(path, **kw)
+
+    monkeypatch.setattr(fleet, "load_log", flaky)
+    res = list(calibrate_files(paths, progress=False))
+    assert res[0]["status"] == "load_error" and "IndexError" in res[0]["message"]
+    assert paths[0] in res[0]["message"]
+    assert res[1]["status"] == "ok"
+
+
 def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
     d, truth = fleet_dir
     out = tmp_path / "fleet.json"
