@@ -5,8 +5,18 @@ from __future__ import annotations
 import gc
 from pathlib import Path
 
+import os
+import tempfile
+
 import jax
 
+# One fresh persistent compilation cache for the whole run (and the CLI subprocesses it
+# starts): functions compiled by one module are reloaded from disk by the next after
+# jax.clear_caches(), and the user's own cache is never touched by the tests.
+os.environ.setdefault("CALIB_JAX_CACHE_DIR", tempfile.mkdtemp(prefix="calib_jax_test_cache_"))
+from calib_jax.runtime import configure  # noqa: E402
+
+configure()
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
