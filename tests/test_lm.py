@@ -71,6 +71,15 @@ def test_optimistix_matches_scipy(problem, tol):
     np.testing.assert_allclose(r.params, ref.x, rtol=tol.PARAM_REL, atol=tol.PARAM_REL)
 
 
+def test_optimistix_out_of_steps_is_not_converged_not_failed(problem):
+    """Two steps from the identity cannot reach the optimum: optimistix says
+    nonlinear_max_steps_reached, which is MAX_ITERATIONS ("not_converged"), not FAILED (it was
+    compared with lineax's max_steps_reached, a different enum member, and never matched)."""
+    x, _ = problem
+    r = jax.jit(lambda p0, x: optx_solve(sphere, p0, x, max_iter=2))(P0, x)
+    assert int(r.status) == Status.MAX_ITERATIONS, Status(int(r.status))
+
+
 def test_truth_recovered_within_stderr(problem, sim48, tol):
     x, _ = problem
     r = gavin(1, "exact", "current")(P0, x)

@@ -69,7 +69,7 @@ def optx_solve(
         sol.result == optx.RESULTS.successful,
         int(Status.CONVERGED),
         jnp.where(
-            sol.result == optx.RESULTS.max_steps_reached,
+            sol.result == optx.RESULTS.nonlinear_max_steps_reached,
             int(Status.MAX_ITERATIONS),
             jnp.where(jnp.isfinite(chi2), int(Status.FAILED), int(Status.NONFINITE)),
         ),
