@@ -145,7 +145,7 @@ def load_input(
     if sensor is not None and "sensor" in inspect.signature(load_log).parameters:
         kw["sensor"] = sensor
     try:
-        return load_log(path, columns=columns, sample_rate=sample_rate, **kw)
+        log = load_log(path, columns=columns, sample_rate=sample_rate, **kw)
     except UnicodeError as exc:
         raise ValueError(f"{path} is not a text log ({exc.reason})") from exc
     except ValueError as exc:
@@ -158,6 +158,9 @@ def load_input(
         raise ValueError(
             f"{path} cannot be read as a sensor log ({type(exc).__name__}: {exc})"
         ) from exc
+    if len(log) == 0:
+        raise ValueError(f"{path} has no data rows")
+    return log
 
 
 def _writable_parent(path: str, option: str) -> None:

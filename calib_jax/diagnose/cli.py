@@ -79,4 +79,8 @@ def run(args: argparse.Namespace) -> int:
 
         for p in write_report(d, args.report):
             print(f"wrote {p}")
+    if d.verdict == "not_possible":  # like every command: input that cannot be used, exit 2
+        why = d.notes[0] if d.notes else "diagnosis not possible"
+        print(f"error: {args.file}: {why}", file=sys.stderr)
+        return 2
     return 0
