@@ -14,6 +14,7 @@ import inspect
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 
 from .datasets import demo_log_path
@@ -648,7 +649,10 @@ def main(argv: list[str] | None = None) -> int:
     debug = os.environ.get("CALIB_JAX_DEBUG", "") not in ("", "0")
     try:
         _prepare_outputs(args)
-        return args.func(args)
+        with warnings.catch_warnings():
+            if not debug:  # numpy's 'Mean of empty slice' on odd input: the error line says it
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return args.func(args)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -393,6 +393,16 @@ def test_detector_options_reach_the_fit(monkeypatch):
     assert seen["min_duration"] == 2.0 and "min_samples" not in seen
 
 
+def test_block_needs_a_calibrate_accel_that_takes_it(capsys):
+    from calib_jax.accel import calibrate_accel
+
+    if "block" in inspect.signature(calibrate_accel).parameters:
+        pytest.skip("calibrate_accel takes block=: --block is passed through")
+    for command in ("accel", "marg"):
+        assert main([command, str(demo_log_path()), "--block", "100"]) == 2
+        assert "--block 100" in capsys.readouterr().err
+
+
 def test_headerless_three_columns_read_as_the_commands_sensor(tmp_path, capsys):
     from calib_jax.io import load_log
 
