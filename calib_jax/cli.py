@@ -104,7 +104,32 @@ def _accel_detector(args: argparse.Namespace, sample_rate: float | None) -> dict
 # inputs and outputs
 
 
-_BINARY_SUFFIXES = (".mat", ".h5", ".hdf5", ".npy", ".npz", ".gz", ".zip", ".bz2", ".xz")
+_MAGIC = {b"\x89HDF": "an HDF5 file", b"PK\x03\x04": "a zip archive", b"\x1f\x8b": "a gzip file"}
+
+
+def _binary_kind(p: Path) -> str | None:
+    """'a binary file' (or its kind) when the file's start has NUL bytes, else None."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    if head.startswith(b"MATLAB"):  # a .mat file the loader failed on: its reason says why
+        return None
+    for magic, kind in _MAGIC.items():
+        if head.startswith(magic) or (kind == "an HDF5 file" and b"\x89HDF\r\n" in head):
+            return kind
+    return "a binary file" if b"\x00" in head else None
+
+
+def _unreadable(path: str, why: str) -> ValueError:
+    kind = _binary_kind(Path(path))
+    if kind is not None:  # the loader's reason quotes binary junk: the kind says more
+        return ValueError(
+            f"{path} is {kind}, not a text log (CSV, TSV, whitespace-separated) or a MATLAB "
+            ".mat file; export the sensor columns to CSV"
+        )
+    return ValueError(why if str(path) in why else f"{path}: {why}")
 
 
 class _OutputError(ValueError):
@@ -131,34 +156,19 @@ def load_input(
         raise ValueError(f"{path} is a directory, not a log file")
     if not p.exists():
         raise ValueError(f"{path} does not exist")
-    if p.suffix.lower() not in _BINARY_SUFFIXES:
-        try:
-            with open(p, "rb") as fh:
-                head = fh.read(4096)
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read it: {exc.strerror or exc}") from exc
-        if b"\x00" in head:
-            raise ValueError(
-                f"{path} is a binary file, not a text log (CSV, TSV, whitespace-separated) or "
-                "a MATLAB .mat file"
-            )
     kw = {}
     if sensor is not None and "sensor" in inspect.signature(load_log).parameters:
         kw["sensor"] = sensor
     try:
         log = load_log(path, columns=columns, sample_rate=sample_rate, **kw)
     except UnicodeError as exc:
-        raise ValueError(f"{path} is not a text log ({exc.reason})") from exc
-    except ValueError as exc:
-        msg = str(exc)
-        raise ValueError(msg if str(path) in msg else f"{path}: {msg}") from exc
+        raise _unreadable(path, f"not text: {exc.reason}") from exc
     except OSError as exc:
         raise ValueError(f"{path}: cannot read it: {exc.strerror or exc}") from exc
     # a file the loader chokes on, in any way, is an input problem
     except Exception as exc:  # noqa: BLE001
-        raise ValueError(
-            f"{path} cannot be read as a sensor log ({type(exc).__name__}: {exc})"
-        ) from exc
+        why = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
+        raise _unreadable(path, why) from exc
     if len(log) == 0:
         raise ValueError(f"{path} has no data rows")
     return log
@@ -467,7 +477,8 @@ def build_parser() -> argparse.ArgumentParser:
         "The accelerometer (--accel): a tumble has no rests, so paper 1's static calibration "
         "is usually impossible; 'auto' tries it on the static poses the detector finds and "
         "falls back to the accelerometer's own ellipsoid (paper 2 compensates every sensor "
-        "with its ellipsoid; motion widens the spread of |a| but leaves the centre). 'none' "
+        "with its ellipsoid; motion widens the spread of |a| but leaves the centre), and uses "
+        "the accelerometer as given when that fit fails too (too little of the sphere). 'none' "
         "uses the accelerometer as given (already calibrated, like the CK-Explorer demo log).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -363,7 +363,8 @@ def calibrate_marg_log(
         the accelerometer's own ellipsoid fitted to every sample (a tumble has no rests; motion
         adds to the spread of |a| but not to the centre). "none": the log's accelerometer is
         already calibrated. "auto" (default): "static" when the log has enough static poses,
-        otherwise "ellipsoid" (with a warning saying why).
+        otherwise "ellipsoid", and "none" when that fit fails too (each step with a warning
+        saying why).
     mag_model, acc_model : str
         Ellipsoid models, see :func:`calib_jax.calibrate_mag`.
     field, g : float, optional
@@ -406,6 +407,14 @@ def calibrate_marg_log(
         acal = calibrate_mag(
             log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
         )
+        if accel == "auto" and not acal.success:
+            # a failed ellipsoid (too little of the sphere covered) would spoil the rotation
+            why = "; ".join(acal.warnings) or acal.solver_message
+            warn.append(
+                f"accelerometer: its ellipsoid fit is '{acal.status}' ({why}); the "
+                "accelerometer is used as given"
+            )
+            acal, method = None, "none"
     mcal = calibrate_mag(log, model=mag_model, field=field, solver=solver, sensor_id=sensor_id)
     acc = np.asarray(log.acc, float) if acal is None else acal.apply(log.acc)
     al = align_mag_to_accel(acc, mcal.apply(log.mag))
