@@ -57,10 +57,15 @@ _LAZY = {
 
 
 def __getattr__(name: str):
-    if name not in _LAZY:
-        raise AttributeError(f"module 'calib_jax' has no attribute {name!r}")
     import importlib
 
+    if name not in _LAZY:  # a submodule, as eager imports used to leave them (cj.datasets)
+        try:
+            return importlib.import_module(f".{name}", __name__)
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module 'calib_jax' has no attribute {name!r}") from None
     module, attr = _LAZY[name]
     mod = importlib.import_module(module, __name__)
     value = mod if attr is None else getattr(mod, attr)
