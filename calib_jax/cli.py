@@ -383,6 +383,10 @@ def run_marg(args: argparse.Namespace) -> int:
     from .marg import calibrate_marg_log
 
     log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate)
+    if args.accel in ("ellipsoid", "none") and (
+        detector_options(args, log.sample_rate) or args.block is not None
+    ):
+        print(f"note: the detector options are not used with --accel {args.accel}", file=sys.stderr)
     rec = calibrate_marg_log(
         log,
         accel=args.accel,
