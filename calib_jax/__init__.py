@@ -19,20 +19,66 @@ Public API (re-exports only; each concept lives in its own module):
 - :mod:`calib_jax.endtoend`: calibration against a reference attitude (BROAD's optical truth).
 """
 
-from . import pipeline
-from .accel import calibrate_accel, fit_normalized, initial_guess
-from .align import align_mag_to_accel, plane_alignment
-from .attitude import estimate_attitude, gauss_newton_quaternion
-from .batch import BatchResult, calibrate_accel_batch, calibrate_mag_batch
-from .calibration import AccelCalibration, MagCalibration
-from .datasets import broad_excerpt_path, demo_log_path, load_broad_excerpt, mag_demo_log_path
-from .implicit import solve_implicit
-from .io import SensorLog, load_log
-from .lm import LMResult, Status, lm_solve, optx_solve
-from .mag import calibrate_mag, fit_ellipsoid_normalized
-from .marg import calibrate_marg, evaluate_turn
-from .models.accel import AccelParams, correct, distort, sphere_residual
-from .static import StaticReport, detect_static
+# Imported on first use (PEP 562), so ``calib-jax --help`` and ``import calib_jax`` do not
+# start JAX; ``from calib_jax import X`` and ``calib_jax.X`` work as before.
+_LAZY = {
+    "pipeline": (".pipeline", None),
+    "calibrate_accel": (".accel", "calibrate_accel"),
+    "fit_normalized": (".accel", "fit_normalized"),
+    "initial_guess": (".accel", "initial_guess"),
+    "align_mag_to_accel": (".align", "align_mag_to_accel"),
+    "plane_alignment": (".align", "plane_alignment"),
+    "estimate_attitude": (".attitude", "estimate_attitude"),
+    "gauss_newton_quaternion": (".attitude", "gauss_newton_quaternion"),
+    "BatchResult": (".batch", "BatchResult"),
+    "calibrate_accel_batch": (".batch", "calibrate_accel_batch"),
+    "calibrate_mag_batch": (".batch", "calibrate_mag_batch"),
+    "AccelCalibration": (".calibration", "AccelCalibration"),
+    "MagCalibration": (".calibration", "MagCalibration"),
+    "broad_excerpt_path": (".datasets", "broad_excerpt_path"),
+    "demo_log_path": (".datasets", "demo_log_path"),
+    "load_broad_excerpt": (".datasets", "load_broad_excerpt"),
+    "mag_demo_log_path": (".datasets", "mag_demo_log_path"),
+    "solve_implicit": (".implicit", "solve_implicit"),
+    "SensorLog": (".io", "SensorLog"),
+    "load_log": (".io", "load_log"),
+    "LMResult": (".lm", "LMResult"),
+    "Status": (".lm", "Status"),
+    "lm_solve": (".lm", "lm_solve"),
+    "optx_solve": (".lm", "optx_solve"),
+    "calibrate_mag": (".mag", "calibrate_mag"),
+    "fit_ellipsoid_normalized": (".mag", "fit_ellipsoid_normalized"),
+    "calibrate_marg": (".marg", "calibrate_marg"),
+    "evaluate_turn": (".marg", "evaluate_turn"),
+    "AccelParams": (".models.accel", "AccelParams"),
+    "correct": (".models.accel", "correct"),
+    "distort": (".models.accel", "distort"),
+    "sphere_residual": (".models.accel", "sphere_residual"),
+    "StaticReport": (".static", "StaticReport"),
+    "detect_static": (".static", "detect_static"),
+}
+
+
+def __getattr__(name: str):
+    import importlib
+
+    if name not in _LAZY:  # a submodule, as eager imports used to leave them (cj.datasets)
+        try:
+            return importlib.import_module(f".{name}", __name__)
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module 'calib_jax' has no attribute {name!r}") from None
+    module, attr = _LAZY[name]
+    mod = importlib.import_module(module, __name__)
+    value = mod if attr is None else getattr(mod, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __version__ = "0.1.0"
 

@@ -1,13 +1,215 @@
-"""Command line: ``calib-jax accel FILE``, ``calib-jax mag FILE``, ``calib-jax record`` and
-``calib-jax demo``."""
+"""Command line: ``calib-jax accel|mag|marg|diagnose FILE``, ``calib-jax batch DIR``,
+``calib-jax record`` and ``calib-jax demo``.
+
+Exit codes: 0 calibrated; 1 the fit ran but did not converge (or is not to be trusted);
+2 the input or an option cannot give a calibration (``error: ...`` says which and what to
+change); 3 an internal error (one line; ``CALIB_JAX_DEBUG=1`` shows the traceback); 130
+interrupted. Nothing here imports JAX until a command runs, so ``--help`` is instant.
+"""
 
 from __future__ import annotations
 
 import argparse
+import inspect
+import math
+import os
 import sys
+import warnings
 from pathlib import Path
 
 from .datasets import demo_log_path
+
+# ---------------------------------------------------------------------------------------------
+# option types: a bad value is a usage error (exit 2) naming the option and the value
+
+
+def _number(kind, low: float, strict: bool, what: str):
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not math.isfinite(v) or v < low or (strict and v == low):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
+        return v
+
+    parse.__name__ = what  # argparse names the type in its messages
+    return parse
+
+
+_pos_int = _number(int, 0, True, "a positive integer")
+_pos_float = _number(float, 0.0, True, "a positive number")
+_nonneg_float = _number(float, 0.0, False, "a number >= 0")
+
+
+def _add_detector_options(p: argparse.ArgumentParser, *, block: bool = True) -> None:
+    """The static detector's options, the same on every command; None means automatic."""
+    g = p.add_argument_group(
+        "static detection", "defaults: automatic (chosen from the log's rate and noise)"
+    )
+    g.add_argument("--window", type=_pos_int, default=None, help="moving-variance window (samples)")
+    g.add_argument(
+        "--threshold-factor",
+        type=_pos_float,
+        default=None,
+        help="threshold as a multiple of the noise level",
+    )
+    g.add_argument(
+        "--min-static",
+        type=_nonneg_float,
+        default=None,
+        help="shortest pose (s, or samples when the log has no rate)",
+    )
+    if block:
+        g.add_argument(
+            "--block",
+            type=_pos_int,
+            default=None,
+            help="the log was recorded pose by pose in blocks of this many samples: use the "
+            "blocks instead of detecting rests",
+        )
+
+
+def detector_options(args: argparse.Namespace, sample_rate: float | None) -> dict:
+    """The detector keywords of :func:`calib_jax.calibrate_accel` that were given (the rest
+    stay automatic). ``--min-static`` is seconds with a sample rate, else samples."""
+    out: dict = {}
+    if getattr(args, "window", None) is not None:
+        out["window"] = args.window
+    if getattr(args, "threshold_factor", None) is not None:
+        out["threshold_factor"] = args.threshold_factor
+    if getattr(args, "min_static", None) is not None:
+        if sample_rate:
+            out["min_duration"] = args.min_static
+        else:
+            out["min_samples"] = int(args.min_static)
+    return out
+
+
+def _accel_detector(args: argparse.Namespace, sample_rate: float | None) -> dict:
+    from .accel import calibrate_accel
+
+    out = detector_options(args, sample_rate)
+    if getattr(args, "block", None) is not None:
+        if "block" not in inspect.signature(calibrate_accel).parameters:
+            raise ValueError(
+                f"--block {args.block}: this calibrate_accel cannot use fixed blocks yet; "
+                "use --window and --min-static (or calib-jax diagnose --block)"
+            )
+        out["block"] = args.block
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# inputs and outputs
+
+
+_MAGIC = {b"\x89HDF": "an HDF5 file", b"PK\x03\x04": "a zip archive", b"\x1f\x8b": "a gzip file"}
+
+
+def _binary_kind(p: Path) -> str | None:
+    """'a binary file' (or its kind) when the file's start has NUL bytes, else None."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    if head.startswith(b"MATLAB"):  # a .mat file the loader failed on: its reason says why
+        return None
+    for magic, kind in _MAGIC.items():
+        if head.startswith(magic) or (kind == "an HDF5 file" and b"\x89HDF\r\n" in head):
+            return kind
+    return "a binary file" if b"\x00" in head else None
+
+
+def _unreadable(path: str, why: str) -> ValueError:
+    kind = _binary_kind(Path(path))
+    if kind is not None:  # the loader's reason quotes binary junk: the kind says more
+        return ValueError(
+            f"{path} is {kind}, not a text log (CSV, TSV, whitespace-separated) or a MATLAB "
+            ".mat file; export the sensor columns to CSV"
+        )
+    return ValueError(why if str(path) in why else f"{path}: {why}")
+
+
+class _OutputError(ValueError):
+    """An output path that cannot be written (named by its option, not the input file)."""
+
+
+def load_input(
+    path: str,
+    *,
+    columns: str | None = None,
+    sample_rate: float | None = None,
+    sensor: str | None = None,
+):
+    """:func:`calib_jax.io.load_log` for the CLI: every way a file can fail to be a log becomes
+    a ValueError naming the file and the cause (exit 2), never a traceback.
+
+    ``sensor`` ("accel" or "mag") tells the loader which sensor a headerless 3-column file
+    holds; it is passed only when the loader accepts it.
+    """
+    from .io import load_log
+
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"{path} is a directory, not a log file")
+    if not p.exists():
+        raise ValueError(f"{path} does not exist")
+    kw = {}
+    if sensor is not None and "sensor" in inspect.signature(load_log).parameters:
+        kw["sensor"] = sensor
+    try:
+        log = load_log(path, columns=columns, sample_rate=sample_rate, **kw)
+    except UnicodeError as exc:
+        raise _unreadable(path, f"not text: {exc.reason}") from exc
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read it: {exc.strerror or exc}") from exc
+    # a file the loader chokes on, in any way, is an input problem
+    except Exception as exc:  # noqa: BLE001
+        why = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
+        raise _unreadable(path, why) from exc
+    if len(log) == 0:
+        raise ValueError(f"{path} has no data rows")
+    return log
+
+
+def _writable_parent(path: str, option: str) -> None:
+    p = Path(path)
+    if p.is_dir():
+        raise _OutputError(f"{option} {path} is a directory; give a file name")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _OutputError(
+            f"{option} {path}: cannot create the folder {p.parent} ({exc.strerror or exc})"
+        ) from None
+    if not os.access(p.parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise _OutputError(f"{option} {path}: not writable")
+
+
+def _writable_dir(path: str, option: str) -> None:
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise _OutputError(f"{option} {path} is a file; give a folder")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _OutputError(f"{option} {path}: cannot create it ({exc.strerror or exc})") from None
+    if not os.access(p, os.W_OK):
+        raise _OutputError(f"{option} {path}: not writable")
+
+
+def _prepare_outputs(args: argparse.Namespace) -> None:
+    """Create the folders of every output path before any compute, or fail fast (exit 2)."""
+    for attr, option in getattr(args, "output_files", ()):
+        value = getattr(args, attr, None)
+        if value and value != "-":
+            _writable_parent(value, option)
+    for attr, option in getattr(args, "output_dirs", ()):
+        value = getattr(args, attr, None)
+        if value:
+            _writable_dir(value, option)
 
 
 def _enable_x64() -> None:
@@ -25,10 +227,9 @@ def _json_out(cal, path: str | None) -> None:
 def run_accel(args: argparse.Namespace) -> int:
     _enable_x64()
     from .accel import calibrate_accel
-    from .io import load_log
 
     # calibrate_accel raises ValueError (exit 2 in main) when the log has no accelerometer
-    log = load_log(args.file, columns=args.columns, sample_rate=args.sample_rate)
+    log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="accel")
     cal = calibrate_accel(
         log,
         g=args.g,
@@ -37,12 +238,9 @@ def run_accel(args: argparse.Namespace) -> int:
         solver=args.solver,
         model=args.model,
         use=args.use,
-        window=args.window,
-        threshold_factor=args.threshold_factor,
-        min_duration=args.min_static if log.sample_rate else None,
-        min_samples=None if log.sample_rate or args.min_static is None else int(args.min_static),
         solver_options={"jacobian": "broyden"} if args.broyden else None,
         sensor_id=args.sensor_id,
+        **_accel_detector(args, log.sample_rate),
     )
     print(f"calib-jax accel: {args.file}")
     print(cal.report())
@@ -53,10 +251,11 @@ def run_accel(args: argparse.Namespace) -> int:
 
 def run_mag(args: argparse.Namespace) -> int:
     _enable_x64()
-    from .io import load_log
     from .mag import calibrate_mag
 
-    log = load_log(args.file, columns=args.columns, sample_rate=args.sample_rate)
+    log = load_input(
+        args.file, columns=args.columns, sample_rate=args.sample_rate, sensor=args.sensor
+    )
     cal = calibrate_mag(
         log,
         model=args.model,
@@ -158,9 +357,8 @@ def run_demo(args: argparse.Namespace) -> int:
     _json_out(cal, str(out / "demo_calibration.json"))
     _plot(cal, str(out / "demo_accel.png"))
 
-    from .align import align_mag_to_accel
     from .datasets import mag_demo_log_path
-    from .mag import calibrate_mag
+    from .marg import calibrate_marg_log
     from .plots import plot_mag
 
     mpath = mag_demo_log_path()
@@ -169,19 +367,45 @@ def run_demo(args: argparse.Namespace) -> int:
         f"tumble (Apache-2.0; see {mpath.parent / 'NOTES.md'})\n"
     )
     mlog = load_log(mpath)
-    mcal = calibrate_mag(mlog, solver=args.solver)
-    print(mcal.report())
-    al = align_mag_to_accel(mlog.acc, mcal.apply(mlog.mag))
-    print(
-        f"\naccel-mag alignment on {al.n_used} of {al.n_total} samples (|a|, |m| within 5 % of "
-        f"their medians): axes {al.permutation_text}; rotation {al.rotation_deg:.2f} deg; dip "
-        f"{al.dip_deg:.2f} +- {al.dip_stderr_deg:.2f} deg; spread of the gravity-field angle "
-        f"{al.spread_before_deg:.2f} -> {al.spread_after_deg:.2f} deg; {al.message}"
-    )
-    _json_out(mcal, str(out / "demo_mag.json"))
-    plot_mag(mcal, mlog.mag, str(out / "demo_mag.png"))
+    # the CK-Explorer accelerometer is already calibrated (NOTES.md): used as given
+    marg = calibrate_marg_log(mlog, accel="none", solver=args.solver)
+    print(marg.mag.report())
+    print("\n" + marg.alignment_text())
+    _json_out(marg.mag, str(out / "demo_mag.json"))
+    _json_out(marg, str(out / "demo_marg.json"))
+    plot_mag(marg.mag, mlog.mag, str(out / "demo_mag.png"))
     print(f"wrote {out / 'demo_mag.png'}")
-    return 0 if cal.success and mcal.success else 1
+    return 0 if cal.success and marg.success else 1
+
+
+def run_marg(args: argparse.Namespace) -> int:
+    _enable_x64()
+    from .marg import calibrate_marg_log
+
+    log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate)
+    if args.accel in ("ellipsoid", "none") and (
+        detector_options(args, log.sample_rate) or args.block is not None
+    ):
+        print(f"note: the detector options are not used with --accel {args.accel}", file=sys.stderr)
+    rec = calibrate_marg_log(
+        log,
+        accel=args.accel,
+        mag_model=args.mag_model,
+        field=args.field,
+        g=args.g,
+        solver=args.solver,
+        sensor_id=args.sensor_id,
+        **(_accel_detector(args, log.sample_rate) if args.accel in ("auto", "static") else {}),
+    )
+    print(f"calib-jax marg: {args.file}")
+    print(rec.report())
+    _json_out(rec, args.json)
+    if args.plot:
+        from .plots import plot_mag
+
+        plot_mag(rec.mag, log.mag, args.plot)
+        print(f"wrote {args.plot}")
+    return 0 if rec.success else 1
 
 
 def run_record(args: argparse.Namespace) -> int:
@@ -191,33 +415,32 @@ def run_record(args: argparse.Namespace) -> int:
     return run(args)
 
 
+_SOLVERS = ["lm1", "lm2", "lm3", "optimistix"]
+_FILE_OUTPUTS = (("json", "--json"), ("plot", "--plot"))
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="calib-jax", description=__doc__)
+    p = argparse.ArgumentParser(
+        prog="calib-jax", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
     a = sub.add_parser("accel", help="calibrate an accelerometer from a multi-position log")
     a.add_argument("file")
-    a.add_argument("--g", type=float, default=None, help="reference magnitude in output units")
+    a.add_argument("--g", type=_pos_float, default=None, help="reference magnitude, output units")
     a.add_argument("--units", default="auto", help="input units: auto, counts, g, m/s^2")
     a.add_argument("--out-units", default=None, help="label of the calibrated output (with --g)")
-    a.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
+    a.add_argument("--solver", default="lm1", choices=_SOLVERS)
     a.add_argument("--model", default="accel9", choices=["accel9", "accel6"])
     a.add_argument("--use", default="means", choices=["means", "samples"])
     a.add_argument("--broyden", action="store_true", help="finite differences + Broyden (paper 1)")
     a.add_argument("--columns", default=None, help="e.g. t,ax,ay,az or ax=AccX,ay=AccY,az=AccZ")
-    a.add_argument("--sample-rate", type=float, default=None, help="Hz, if the log has no time")
-    a.add_argument("--window", type=int, default=None, help="moving-variance window (samples)")
-    a.add_argument("--threshold-factor", type=float, default=6.0)
-    a.add_argument(
-        "--min-static",
-        type=float,
-        default=None,
-        help="shortest pose (s, or samples without a rate)",
-    )
+    a.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
+    _add_detector_options(a)
     a.add_argument("--sensor-id", default=None)
     a.add_argument("--json", default=None, help="write the calibration JSON here")
     a.add_argument("--plot", default=None, help="write a PNG figure here")
-    a.set_defaults(func=run_accel)
+    a.set_defaults(func=run_accel, output_files=_FILE_OUTPUTS)
 
     m = sub.add_parser(
         "mag", help="ellipsoid (hard/soft iron) calibration from a free-rotation log (paper 2)"
@@ -230,17 +453,62 @@ def build_parser() -> argparse.ArgumentParser:
         help="hard iron only, axis-aligned ellipsoid, full ellipsoid, or the lowest BIC",
     )
     m.add_argument(
-        "--field", type=float, default=None, help="known field magnitude (sets the output scale)"
+        "--field", type=_pos_float, default=None, help="known field magnitude (output scale)"
     )
     m.add_argument("--units", default=None, help="label of the raw units (report only)")
-    m.add_argument("--sensor", default="mag", choices=["mag", "accel"], help="which columns to fit")
-    m.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
+    m.add_argument(
+        "--sensor",
+        default="mag",
+        choices=["mag", "accel"],
+        help="which columns to fit (a headerless 3-column file is read as this sensor)",
+    )
+    m.add_argument("--solver", default="lm1", choices=_SOLVERS)
     m.add_argument("--columns", default=None, help="e.g. mx,my,mz or mx=MagX,my=MagY,mz=MagZ")
-    m.add_argument("--sample-rate", type=float, default=None, help="Hz, if the log has no time")
+    m.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
     m.add_argument("--sensor-id", default=None)
     m.add_argument("--json", default=None, help="write the calibration JSON here")
     m.add_argument("--plot", default=None, help="write a PNG figure here")
-    m.set_defaults(func=run_mag)
+    m.set_defaults(func=run_mag, output_files=_FILE_OUTPUTS)
+
+    g = sub.add_parser(
+        "marg",
+        help="accelerometer + magnetometer (MARG) calibration of one tumble log (paper 2)",
+        description="Paper 2's routine on one log with accelerometer and magnetometer columns: "
+        "the accelerometer's calibration, the magnetometer's ellipsoid, then the rotation from "
+        "the magnetometer to the accelerometer frame (with the signed axis permutation when the "
+        "magnetometer's axes are swapped or negated) from the constant angle between gravity "
+        "and the field; reports the dip and the spread of that angle before and after.\n\n"
+        "The accelerometer (--accel): a tumble has no rests, so paper 1's static calibration "
+        "is usually impossible; 'auto' tries it on the static poses the detector finds and "
+        "falls back to the accelerometer's own ellipsoid (paper 2 compensates every sensor "
+        "with its ellipsoid; motion widens the spread of |a| but leaves the centre), and uses "
+        "the accelerometer as given when that fit fails too (too little of the sphere). 'none' "
+        "uses the accelerometer as given (already calibrated, like the CK-Explorer demo log).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    g.add_argument("file")
+    g.add_argument(
+        "--accel",
+        default="auto",
+        choices=["auto", "static", "ellipsoid", "none"],
+        help="how to calibrate the accelerometer (see above; default auto)",
+    )
+    g.add_argument(
+        "--mag-model",
+        default="auto",
+        choices=["sphere", "diag", "full", "auto"],
+        help="magnetometer ellipsoid model (default: the lowest BIC)",
+    )
+    g.add_argument("--field", type=_pos_float, default=None, help="known field magnitude")
+    g.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference (static)")
+    g.add_argument("--solver", default="lm1", choices=_SOLVERS)
+    g.add_argument("--columns", default=None, help="e.g. ax,ay,az,mx,my,mz or ax=AccX,...")
+    g.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
+    _add_detector_options(g)
+    g.add_argument("--sensor-id", default=None)
+    g.add_argument("--json", default=None, help="write the MARG record (kind 'marg') here")
+    g.add_argument("--plot", default=None, help="write the magnetometer figure (PNG) here")
+    g.set_defaults(func=run_marg, output_files=_FILE_OUTPUTS)
 
     b = sub.add_parser(
         "batch", help="calibrate every log under a directory, in chunks (or on a Dask cluster)"
@@ -249,10 +517,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--pattern", default="*.csv", help="file glob, searched recursively")
     b.add_argument("--sensor", default="accel", choices=["accel", "mag"])
     b.add_argument("--model", default=None, help="accel9|accel6 or sphere|diag|full")
-    b.add_argument("--g", type=float, default=1.0, help="accelerometer reference magnitude")
-    b.add_argument("--field", type=float, default=None, help="magnetometer field magnitude")
+    b.add_argument("--g", type=_pos_float, default=1.0, help="accelerometer reference magnitude")
+    b.add_argument("--field", type=_pos_float, default=None, help="magnetometer field magnitude")
     b.add_argument("--columns", default=None, help="column mapping for every file")
-    b.add_argument("--chunk", type=int, default=256, help="files per batch fit")
+    b.add_argument("--chunk", type=_pos_int, default=256, help="files per batch fit")
     b.add_argument(
         "--dask",
         nargs="?",
@@ -260,16 +528,16 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="spread chunks over Dask: a scheduler address, or none for a local cluster",
     )
-    b.add_argument("--workers", type=int, default=2, help="local Dask workers")
+    b.add_argument("--workers", type=_pos_int, default=2, help="local Dask workers")
     b.add_argument("--json", default=None, help="write all results here (streamed)")
-    b.set_defaults(func=run_batch)
+    b.set_defaults(func=run_batch, output_files=(("json", "--json"),))
 
     d = sub.add_parser(
         "demo", help="calibrate the accelerometer and magnetometer logs shipped with the package"
     )
-    d.add_argument("--out", default="calib_jax_demo", help="folder for the JSON and the figure")
-    d.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
-    d.set_defaults(func=run_demo)
+    d.add_argument("--out", default="calib_jax_demo", help="folder for the JSON and the figures")
+    d.add_argument("--solver", default="lm1", choices=_SOLVERS)
+    d.set_defaults(func=run_demo, output_dirs=(("out", "--out"),))
 
     r = sub.add_parser(
         "record",
@@ -286,7 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="device path or pyserial URL (/dev/ttyACM0, socket://host:port); repeat for more",
     )
-    r.add_argument("--baud", type=int, default=115200)
+    r.add_argument("--baud", type=_pos_int, default=115200)
     r.add_argument(
         "--columns",
         default=None,
@@ -300,37 +568,122 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--out", required=True, help="log file (several ports: FILE.devK.csv)")
     r.add_argument("--sensor", default="accel", choices=["accel", "mag", "marg"])
-    r.add_argument("--seconds", type=float, default=None, help="stop after this long")
+    r.add_argument("--seconds", type=_pos_float, default=None, help="stop after this long")
     r.add_argument("--resume", action="store_true", help="append to an existing log")
     r.add_argument("--overwrite", action="store_true", help="replace an existing log")
     r.add_argument("--no-auto-stop", action="store_true", help="keep going once covered")
-    r.add_argument("--target-poses", type=int, default=48, help="distinct poses (paper 1: 48)")
+    r.add_argument("--target-poses", type=_pos_int, default=48, help="distinct poses (paper 1: 48)")
     r.add_argument(
         "--max-reconnect",
-        type=float,
+        type=_nonneg_float,
         default=30.0,
         help="seconds to keep reconnecting an unplugged device before it counts as gone",
     )
-    r.add_argument("--g", type=float, default=None, help="accelerometer reference magnitude")
-    r.add_argument("--field", type=float, default=None, help="known field magnitude (mag)")
-    r.add_argument("--window", type=int, default=None, help="moving-variance window (samples)")
-    r.add_argument("--min-static", type=float, default=None, help="shortest pose (s)")
-    r.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3", "optimistix"])
-    r.set_defaults(func=run_record)
+    r.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference magnitude")
+    r.add_argument("--field", type=_pos_float, default=None, help="known field magnitude (mag)")
+    r.add_argument("--window", type=_pos_int, default=None, help="moving-variance window (samples)")
+    r.add_argument("--min-static", type=_nonneg_float, default=None, help="shortest pose (s)")
+    r.add_argument("--solver", default="lm1", choices=_SOLVERS)
+    r.set_defaults(func=run_record, output_files=(("out", "--out"),))
 
-    from .diagnose.cli import add_parser as add_diagnose
-
-    add_diagnose(sub)
+    _add_diagnose_parser(sub)
     return p
 
 
+def _add_diagnose_parser(sub) -> None:
+    # defined here, not in calib_jax.diagnose, whose package import starts JAX
+    p = sub.add_parser(
+        "diagnose",
+        help="trace the residual of a calibration to effects its model lacks",
+        description="Fit the declared model, measure the noise floors, add catalogue effects "
+        "(bias drift, temperature, scale nonlinearity, outliers, hard-iron drift, soft iron; "
+        "for MARG the accel-mag misalignment and timing offset) "
+        "only where every acceptance test passes, and report the error before and after.",
+    )
+    p.add_argument("file", help="log file (CSV/TSV/text/.mat)")
+    p.add_argument("--sensor", choices=("accel", "mag", "marg"), default="accel")
+    p.add_argument("--columns", help="column mapping for headerless files, e.g. t,ax,ay,az")
+    p.add_argument("--sample-rate", type=_pos_float, help="Hz, when the log has no time column")
+    _add_detector_options(p, block=False)
+    p.add_argument(
+        "--block",
+        type=_pos_int,
+        help="accel: observations are consecutive blocks of this many samples (logs recorded "
+        "pose by pose with a fixed count) instead of detected static intervals",
+    )
+    p.add_argument(
+        "--model",
+        choices=("full", "sphere"),
+        default="full",
+        help="mag: the declared model (sphere makes soft_iron a candidate)",
+    )
+    p.add_argument("--degree", type=int, choices=(1, 2), default=1, help="effect polynomial degree")
+    p.add_argument("--seed", type=int, default=0, help="seed of the null-test simulations")
+    p.add_argument("--json", dest="json_out", help="write the diagnosis JSON here ('-': stdout)")
+    p.add_argument("--report", help="write the figures into this directory")
+    p.set_defaults(
+        func=_run_diagnose,
+        output_files=(("json_out", "--json"),),
+        output_dirs=(("report", "--report"),),
+    )
+
+
+def _run_diagnose(args: argparse.Namespace) -> int:
+    from .diagnose.cli import run
+
+    return run(args)
+
+
+def _is_input_error(exc: BaseException) -> bool:
+    """Exceptions that mean 'this file or option cannot give a calibration' (exit 2)."""
+    if isinstance(exc, ValueError | OSError | EOFError):  # UnicodeError, LinAlgError, gzip
+        return True
+    import zipfile
+
+    return isinstance(exc, zipfile.BadZipFile)
+
+
+def _error_text(exc: BaseException, args: argparse.Namespace) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        msg = f"{exc.strerror}: {exc.filename}" if exc.filename else exc.strerror
+    else:
+        msg = str(exc) or type(exc).__name__
+    where = getattr(args, "file", None) or getattr(args, "dir", None)
+    if where and not isinstance(exc, _OutputError) and str(where) not in msg:
+        msg = f"{where}: {msg}"
+    return msg
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command; returns the exit code (module docstring) and prints no traceback."""
+    parser = build_parser()
     try:
-        return args.func(args)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error (2): argparse has said why
+        return exc.code if isinstance(exc.code, int) else 2
+    debug = os.environ.get("CALIB_JAX_DEBUG", "") not in ("", "0")
+    try:
+        _prepare_outputs(args)
+        with warnings.catch_warnings():
+            if not debug:  # numpy's 'Mean of empty slice' on odd input: the error line says it
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    # the front door prints one line, never a traceback
+    except Exception as exc:  # noqa: BLE001
+        if debug:
+            raise
+        if _is_input_error(exc):
+            print(f"error: {_error_text(exc, args)}", file=sys.stderr)
+            return 2
+        print(
+            f"internal error: {type(exc).__name__}: {exc} (please report; rerun with "
+            "CALIB_JAX_DEBUG=1 for the traceback)",
+            file=sys.stderr,
+        )
+        return 3
 
 
 if __name__ == "__main__":

@@ -1,5 +1,9 @@
 """Paper 2's MARG routine end to end, and its evaluation by the Gauss-Newton attitude.
 
+:func:`calibrate_marg_log` is the one-log version behind ``calib-jax marg``: accelerometer,
+magnetometer ellipsoid and accel-mag rotation of one recording, as a :class:`MARGRecord` that
+saves to and loads from versioned JSON (``kind: "marg"``).
+
 :func:`calibrate_marg` runs the two routines of paper 2 on two recordings (a free tumble for
 the ellipsoids, a turn about the board's z axis on a fixed plane for the sensor planes) and
 adds the accel-mag rotation. :func:`evaluate_turn` reproduces the paper's evaluation (section 3,
@@ -10,14 +14,18 @@ and pitch deviation from the ideal 0 (relative to the starting pose).
 
 from __future__ import annotations
 
+import datetime as _dt
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
 
 from .align import MagAccelAlignment, PlaneAlignment, align_mag_to_accel, plane_alignment
 from .attitude import estimate_attitude
-from .calibration import MagCalibration
+from .calibration import AccelCalibration, MagCalibration, _read_json, _sanitize
 from .mag import calibrate_mag
 
 
@@ -165,3 +173,271 @@ def evaluation_table(ev: dict[str, TurnEvaluation]) -> str:
             f"{e.roll_max_deg:.2f} | {e.pitch_max_deg:.2f} | {e.yaw_span_deg:.0f} |"
         )
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# one log -> one record (calib-jax marg)
+
+MARG_FORMAT_VERSION = 1
+ACCEL_METHODS = ("auto", "static", "ellipsoid", "none")
+_RANK = {"ok": 0, "poorly_determined": 1, "not_converged": 2, "failed": 3}
+
+
+def _worst(*statuses: str) -> str:
+    return max(statuses, key=lambda s: _RANK.get(s, 3))
+
+
+@dataclass(frozen=True, eq=False)
+class MARGRecord:
+    """One MARG calibration of one log: what ``calib-jax marg`` prints and writes.
+
+    Frames: ``R_mag_to_acc`` takes magnetometer-frame vectors into the accelerometer frame,
+    m_acc = R_mag_to_acc m_mag (the ``R_acc_from_mag`` of :class:`~calib_jax.align.
+    MagAccelAlignment`); it includes the signed axis permutation ``permutation`` (text such as
+    ``"x <- +y, y <- +x, z <- -z"``: the accelerometer's x is the magnetometer's +y) and the
+    small rotation of ``rotation_deg`` degrees left after it. Angles in degrees.
+    """
+
+    kind: ClassVar[str] = "marg"
+
+    accel: AccelCalibration | MagCalibration | None
+    """Paper 1's model (``accel_method="static"``), the accelerometer's own ellipsoid
+    (``"ellipsoid"``, paper 2), or None (``"none"``: the log's accelerometer used as given)."""
+    accel_method: str
+    mag: MagCalibration
+    R_mag_to_acc: np.ndarray
+    permutation: str
+    permutation_matrix: np.ndarray
+    rotation_deg: float
+    dip_deg: float
+    """Inclination of the field, positive when it points down (northern hemisphere)."""
+    dip_stderr_deg: float
+    dip_std_before_deg: float
+    """Std of the gravity-field angle over the samples used, with R = I (after the ellipsoids)."""
+    dip_std_after_deg: float
+    """The same with the magnetometer rotated by ``R_mag_to_acc``."""
+    n_used: int
+    n_total: int
+    alignment_status: str
+    alignment_message: str
+    status: str
+    warnings: list[str] = field(default_factory=list)
+    source: str | None = None
+    date: str = ""
+    format_version: int = MARG_FORMAT_VERSION
+
+    @property
+    def success(self) -> bool:
+        return self.status in ("ok", "poorly_determined")
+
+    def alignment_text(self) -> str:
+        """One line on the accel-mag rotation (the demo's wording)."""
+        return (
+            f"accel-mag alignment on {self.n_used} of {self.n_total} samples (|a|, |m| within "
+            f"5 % of their medians): axes {self.permutation}; rotation {self.rotation_deg:.2f} "
+            f"deg; dip {self.dip_deg:.2f} +- {self.dip_stderr_deg:.2f} deg; spread of the "
+            f"gravity-field angle {self.dip_std_before_deg:.2f} -> {self.dip_std_after_deg:.2f} "
+            f"deg; {self.alignment_message}"
+        )
+
+    def report(self) -> str:
+        how = {
+            "static": "paper 1's nine-parameter model on the static poses",
+            "ellipsoid": "its own ellipsoid (paper 2; the log has too few static poses for "
+            "paper 1)",
+            "none": "none (used as given)",
+        }[self.accel_method]
+        out = [f"accelerometer calibration: {how}"]
+        if self.accel is not None:
+            out.append(self.accel.report())
+        out += ["", "magnetometer:", self.mag.report(), "", self.alignment_text()]
+        out.append(f"status: {self.status}")
+        out += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(out)
+
+    # ---- JSON ------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return _sanitize(
+            {
+                "format_version": self.format_version,
+                "kind": self.kind,
+                "date": self.date,
+                "source": self.source,
+                "status": self.status,
+                "R_mag_to_acc": np.asarray(self.R_mag_to_acc).tolist(),
+                "permutation": self.permutation,
+                "permutation_matrix": np.asarray(self.permutation_matrix).tolist(),
+                "rotation_deg": self.rotation_deg,
+                "dip_deg": self.dip_deg,
+                "dip_stderr_deg": self.dip_stderr_deg,
+                "dip_std_before_deg": self.dip_std_before_deg,
+                "dip_std_after_deg": self.dip_std_after_deg,
+                "n_used": self.n_used,
+                "n_total": self.n_total,
+                "alignment_status": self.alignment_status,
+                "alignment_message": self.alignment_message,
+                "accel_method": self.accel_method,
+                "accel": None if self.accel is None else self.accel.to_dict(),
+                "mag": self.mag.to_dict(),
+                "warnings": list(self.warnings),
+            }
+        )
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> MARGRecord:
+        if d.get("kind") != cls.kind:
+            raise ValueError(
+                f"not a MARG calibration (kind {d.get('kind')!r}); load accelerometer files "
+                "with AccelCalibration.load and ellipsoid files with MagCalibration.load"
+            )
+        if d.get("format_version") != MARG_FORMAT_VERSION:
+            raise ValueError(
+                f"MARG format_version {d.get('format_version')!r} is not supported (this "
+                f"calib_jax reads version {MARG_FORMAT_VERSION})"
+            )
+        a = d.get("accel")
+        if a is None:
+            accel = None
+        elif a.get("kind") == "ellipsoid":
+            accel = MagCalibration.from_dict(a)
+        else:
+            accel = AccelCalibration.from_dict(a)
+        return cls(
+            accel=accel,
+            accel_method=d["accel_method"],
+            mag=MagCalibration.from_dict(d["mag"]),
+            R_mag_to_acc=np.array(d["R_mag_to_acc"], float),
+            permutation=d["permutation"],
+            permutation_matrix=np.array(d["permutation_matrix"], float),
+            rotation_deg=float(d["rotation_deg"]),
+            dip_deg=float(d["dip_deg"]),
+            dip_stderr_deg=float(d["dip_stderr_deg"]),
+            dip_std_before_deg=float(d["dip_std_before_deg"]),
+            dip_std_after_deg=float(d["dip_std_after_deg"]),
+            n_used=int(d["n_used"]),
+            n_total=int(d["n_total"]),
+            alignment_status=d["alignment_status"],
+            alignment_message=d["alignment_message"],
+            status=d["status"],
+            warnings=list(d.get("warnings", [])),
+            source=d.get("source"),
+            date=d.get("date", ""),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> MARGRecord:
+        return cls.from_dict(_read_json(path))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, MARGRecord):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def calibrate_marg_log(
+    log,
+    *,
+    accel: str = "auto",
+    mag_model: str = "auto",
+    acc_model: str = "full",
+    field: float | None = None,
+    g: float | None = None,
+    solver: str = "lm1",
+    sensor_id: str | None = None,
+    **static_options,
+) -> MARGRecord:
+    """Accelerometer, magnetometer ellipsoid and accel-mag rotation of one log (paper 2).
+
+    Parameters
+    ----------
+    log : SensorLog
+        A log with accelerometer and magnetometer columns, recorded through many orientations.
+    accel : {"auto", "static", "ellipsoid", "none"}
+        How to calibrate the accelerometer. "static": paper 1's nine-parameter model on the
+        static poses (needs rests in at least nine orientations). "ellipsoid": paper 2's way,
+        the accelerometer's own ellipsoid fitted to every sample (a tumble has no rests; motion
+        adds to the spread of |a| but not to the centre). "none": the log's accelerometer is
+        already calibrated. "auto" (default): "static" when the log has enough static poses,
+        otherwise "ellipsoid", and "none" when that fit fails too (each step with a warning
+        saying why).
+    mag_model, acc_model : str
+        Ellipsoid models, see :func:`calib_jax.calibrate_mag`.
+    field, g : float, optional
+        Known field magnitude, and the accelerometer's reference magnitude (static only).
+    static_options
+        Static detection for ``accel="static"``/``"auto"`` (window, threshold_factor,
+        min_duration, min_samples, ...), passed to :func:`calib_jax.calibrate_accel`.
+
+    Raises
+    ------
+    ValueError
+        The log lacks accelerometer or magnetometer columns, ``accel`` is unknown, or the data
+        cannot give a calibration or a rotation (with what to change).
+    """
+    from .accel import calibrate_accel
+
+    if accel not in ACCEL_METHODS:
+        raise ValueError(f"accel must be one of {ACCEL_METHODS}, got {accel!r}")
+    if log.acc is None or log.mag is None:
+        raise ValueError(
+            f"{log.path}: a MARG calibration needs accelerometer and magnetometer columns "
+            "(ax, ay, az, mx, my, mz); map them with --columns"
+        )
+    warn: list[str] = []
+    acal: AccelCalibration | MagCalibration | None = None
+    method = accel
+    if accel in ("auto", "static"):
+        try:
+            acal = calibrate_accel(log, g=g, solver=solver, sensor_id=sensor_id, **static_options)
+            method = "static"
+        except ValueError as exc:
+            if accel == "static":
+                raise
+            warn.append(
+                f"accelerometer: paper 1's static calibration is not possible ({exc}); its "
+                "ellipsoid is fitted instead"
+            )
+            method = "ellipsoid"
+    if method == "ellipsoid":
+        acal = calibrate_mag(
+            log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
+        )
+        if accel == "auto" and not acal.success:
+            # a failed ellipsoid (too little of the sphere covered) would spoil the rotation
+            why = "; ".join(acal.warnings) or acal.solver_message
+            warn.append(
+                f"accelerometer: its ellipsoid fit is '{acal.status}' ({why}); the "
+                "accelerometer is used as given"
+            )
+            acal, method = None, "none"
+    mcal = calibrate_mag(log, model=mag_model, field=field, solver=solver, sensor_id=sensor_id)
+    acc = np.asarray(log.acc, float) if acal is None else acal.apply(log.acc)
+    al = align_mag_to_accel(acc, mcal.apply(log.mag))
+    statuses = [mcal.status, al.status] + ([] if acal is None else [acal.status])
+    warn += [f"alignment: {w}" for w in al.warnings]
+    return MARGRecord(
+        accel=acal,
+        accel_method=method,
+        mag=mcal,
+        R_mag_to_acc=np.asarray(al.R_acc_from_mag, float),
+        permutation=al.permutation_text,
+        permutation_matrix=np.asarray(al.permutation, float),
+        rotation_deg=float(al.rotation_deg),
+        dip_deg=float(al.dip_deg),
+        dip_stderr_deg=float(al.dip_stderr_deg),
+        dip_std_before_deg=float(al.spread_before_deg),
+        dip_std_after_deg=float(al.spread_after_deg),
+        n_used=int(al.n_used),
+        n_total=int(al.n_total),
+        alignment_status=al.status,
+        alignment_message=al.message,
+        status=_worst(*statuses),
+        warnings=warn,
+        source=log.path,
+        date=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+    )

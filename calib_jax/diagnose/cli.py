@@ -8,48 +8,42 @@ import sys
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser(
-        "diagnose",
-        help="trace the residual of a calibration to effects its model lacks",
-        description="Fit the declared model, measure the noise floors, add catalogue effects "
-        "(bias drift, temperature, scale nonlinearity, outliers, hard-iron drift, soft iron; "
-        "for MARG the accel-mag misalignment and timing offset) "
-        "only where every acceptance test passes, and report the error before and after.",
-    )
-    p.add_argument("file", help="log file (CSV/TSV/text/.mat)")
-    p.add_argument("--sensor", choices=("accel", "mag", "marg"), default="accel")
-    p.add_argument("--columns", help="column mapping for headerless files, e.g. t,ax,ay,az")
-    p.add_argument("--sample-rate", type=float, help="Hz, when the log has no time column")
-    p.add_argument(
-        "--block",
-        type=int,
-        help="accel: observations are consecutive blocks of this many samples (logs recorded "
-        "pose by pose with a fixed count) instead of detected static intervals",
-    )
-    p.add_argument(
-        "--model",
-        choices=("full", "sphere"),
-        default="full",
-        help="mag: the declared model (sphere makes soft_iron a candidate)",
-    )
-    p.add_argument("--degree", type=int, choices=(1, 2), default=1, help="effect polynomial degree")
-    p.add_argument("--seed", type=int, default=0, help="seed of the null-test simulations")
-    p.add_argument("--json", dest="json_out", help="write the diagnosis JSON here ('-': stdout)")
-    p.add_argument("--report", help="write the figures into this directory")
-    p.set_defaults(func=run)
+    """Add the ``diagnose`` subcommand to an argparse subparsers object (the parser itself
+    lives in :mod:`calib_jax.cli`, which must not import this package for ``--help``)."""
+    from ..cli import _add_diagnose_parser
+
+    _add_diagnose_parser(sub)
 
 
 def run(args: argparse.Namespace) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from ..io.files import load_log
+    from ..cli import detector_options, load_input
     from .loop import diagnose_accel, diagnose_mag
 
-    log = load_log(args.file, columns=args.columns)
+    log = load_input(
+        args.file,
+        columns=args.columns,
+        sample_rate=args.sample_rate,
+        sensor=args.sensor if args.sensor in ("accel", "mag") else None,
+    )
+    detector = detector_options(args, args.sample_rate or log.sample_rate)
+    if detector and args.sensor != "accel":
+        print(
+            f"note: --window/--threshold-factor/--min-static apply to --sensor accel; "
+            f"ignored for {args.sensor}",
+            file=sys.stderr,
+        )
     if args.sensor == "accel":
+        # only the detector options given are passed, so the defaults stay the detector's
         d = diagnose_accel(
-            log, sample_rate=args.sample_rate, block=args.block, degree=args.degree, seed=args.seed
+            log,
+            sample_rate=args.sample_rate,
+            block=args.block,
+            degree=args.degree,
+            seed=args.seed,
+            **detector,
         )
     elif args.sensor == "marg":
         from .marg import diagnose_marg
@@ -85,4 +79,8 @@ def run(args: argparse.Namespace) -> int:
 
         for p in write_report(d, args.report):
             print(f"wrote {p}")
+    if d.verdict == "not_possible":  # like every command: input that cannot be used, exit 2
+        why = d.notes[0] if d.notes else "diagnosis not possible"
+        print(f"error: {args.file}: {why}", file=sys.stderr)
+        return 2
     return 0
