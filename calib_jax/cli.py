@@ -213,9 +213,11 @@ def _prepare_outputs(args: argparse.Namespace) -> None:
 
 
 def _enable_x64() -> None:
-    import jax
+    """float64 and the persistent compilation cache (calib_jax.runtime): a command's fits
+    compile once per machine instead of once per call."""
+    from .runtime import configure
 
-    jax.config.update("jax_enable_x64", True)
+    configure()
 
 
 def _json_out(cal, path: str | None) -> None:

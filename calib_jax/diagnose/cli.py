@@ -16,10 +16,9 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import jax
+    from ..cli import _enable_x64, detector_options, load_input
 
-    jax.config.update("jax_enable_x64", True)
-    from ..cli import detector_options, load_input
+    _enable_x64()
     from .loop import diagnose_accel, diagnose_mag
 
     log = load_input(
