@@ -300,12 +300,14 @@ _DELIMS = ("\t", ";", ",", "|", None)
 _DELIM_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
 
 
-def _sniff(lines: list[str]) -> tuple[str | None, bool, int]:
-    """Separator, decimal commas, and the usual row width, from data-looking lines."""
-    best = (0.0, 0, None, False, 0)
+def _sniff(lines: list[str]) -> tuple[str | None, bool, int, bool]:
+    """Separator, decimal commas, the usual row width, and whether rows end in a separator."""
+    best = (0.0, 0, None, False, 0, False)
     for rank, d in enumerate(_DELIMS):
         rows = [[_strip_cell(c) for c in _cells(ln, d)] for ln in lines]
-        if d is not None:  # a trailing separator ('1,2,3,') is not an empty last column
+        # a separator ending most rows ('1,2,3,') does not start an empty last column
+        trailing = d is not None and 2 * sum(ln.rstrip().endswith(d) for ln in lines) > len(lines)
+        if trailing:
             rows = [r[:-1] if len(r) > 1 and r[-1] == "" else r for r in rows]
         counts = Counter(len(r) for r in rows)
         w, nw = max(counts.items(), key=lambda kv: (kv[1], kv[0]))
@@ -320,10 +322,10 @@ def _sniff(lines: list[str]) -> tuple[str | None, bool, int]:
             if dec and d != "," and any("," in c for c in cells):
                 score = 0.99 * share * sum(_num(c.replace(",", ".")) for c in cells) / len(cells)
             if (score, -rank) > (best[0], -best[1]):
-                best = (score, rank, d, dec, w)
+                best = (score, rank, d, dec, w, trailing)
     if best[0] <= 0:
         raise ValueError("no rows of numbers found")
-    return best[2], best[3], best[4]
+    return best[2], best[3], best[4], best[5]
 
 
 @dataclass
@@ -337,12 +339,12 @@ class _Table:
 
 
 def _parse_rows(
-    rows: list[str], delim: str | None, width: int, dec: bool
+    rows: list[str], delim: str | None, width: int, dec: bool, trailing: bool
 ) -> tuple[np.ndarray, int]:
     """A float matrix of the rows with `width` fields (others skipped and counted)."""
     if dec:
         rows = [ln.replace(",", ".") for ln in rows]
-    if delim is not None:
+    if trailing:
         rows = [ln.rstrip()[:-1] if ln.rstrip().endswith(delim) else ln for ln in rows]
     rows = [ln.split("#", 1)[0] if "#" in ln else ln for ln in rows]
     widths = [len(_cells(ln, delim)) for ln in rows]
@@ -388,7 +390,7 @@ def _read_text(path: Path, raw: bytes, on_disk: bool, notes: list[str]) -> _Tabl
         raise ValueError(f"{path} has no data rows (only blank or comment lines)")
     sample = sample[-200:] if len(sample) > 200 else sample
     try:
-        delim, dec, width = _sniff(sample)
+        delim, dec, width, trailing = _sniff(sample)
     except ValueError:
         first = next((ln for ln in head if not _skip(ln)), "")
         raise ValueError(
@@ -406,7 +408,7 @@ def _read_text(path: Path, raw: bytes, on_disk: bool, notes: list[str]) -> _Tabl
 
     def split(line: str) -> list[str]:
         cells = _cells(line, delim)
-        if delim is not None and len(cells) > 1 and not cells[-1].strip():
+        if trailing and len(cells) > 1 and not cells[-1].strip():
             cells = cells[:-1]
         return cells
 
@@ -519,7 +521,7 @@ def _read_text(path: Path, raw: bytes, on_disk: bool, notes: list[str]) -> _Tabl
             data = None
     if data is None:
         body = [ln for ln in _split_lines(text)[start:] if not _skip(ln)]
-        data, more = _parse_rows(body, delim, width, dec)
+        data, more = _parse_rows(body, delim, width, dec, trailing)
         bad += more
     return _Table(header, data, bad, preamble, odd_header)
 
