@@ -221,6 +221,39 @@ def test_clean_files_take_numpys_parser(tmp_path, monkeypatch):
         np.testing.assert_allclose(log.gyro, x[:, 4:7], rtol=1e-15)
 
 
+@pytest.mark.parametrize("case", ["clean", "utf16", "latin1_late", "ragged_late", "long_preamble"])
+def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
+    # files over 64 kB are sniffed from their first and last bytes and parsed by numpy from
+    # disk; whatever that path cannot take must fall back to the whole text and agree
+    n = 6000
+    x = np.column_stack([np.arange(n) / 100, np.arange(n) % 97, np.arange(n) % 89, -np.ones(n)])
+    lines = [",".join(f"{v:g}" for v in r) for r in x]
+    head = ["t,ax,ay,az"]
+    enc = "utf-8"
+    if case == "utf16":
+        enc = "utf-16"
+    elif case == "latin1_late":
+        lines[5000] = lines[5000] + ",\xb5"  # a 5th field with a non-UTF-8 byte, far down
+        enc = "latin-1"
+    elif case == "ragged_late":
+        lines[5000] = "1,2"
+    elif case == "long_preamble":
+        head = [f"# note {i} " + "x" * 60 for i in range(1200)] + ["Fs,100"] + head
+    p = _write(tmp_path, "\n".join(head + lines) + "\n", encoding=enc)
+    assert p.stat().st_size > 70_000
+    log = load_log(p)
+    keep = np.ones(n, bool)
+    if case in ("latin1_late", "ragged_late"):
+        keep[5000] = False
+        assert any(s_.startswith("1 rows had the wrong number") for s_ in log.notes)
+    np.testing.assert_array_equal(log.acc, x[keep, 1:4])
+    np.testing.assert_array_equal(log.t, x[keep, 0])
+    if case == "latin1_late":
+        assert any("Latin-1" in s_ for s_ in log.notes)
+    if case == "long_preamble":
+        assert log.sample_rate == 100
+
+
 # ---------------------------------------------------------------- clear errors
 
 
@@ -249,10 +282,11 @@ def test_unreadable_file(tmp_path, monkeypatch):
     # the same class where the suite runs as root: the OS refusing the read
     p = _write(tmp_path, "ax,ay,az\n1,2,3\n")
 
-    def deny(self):
-        raise PermissionError(13, "Permission denied", str(self))
+    def deny(name, *a, **k):
+        raise PermissionError(13, "Permission denied", str(name))
 
     monkeypatch.setattr(type(p), "read_bytes", deny)
+    monkeypatch.setattr(F, "open", deny, raising=False)  # the loader's own open()
     with pytest.raises(ValueError, match="permission denied.*chmod"):
         load_log(p)
 

@@ -35,6 +35,7 @@ import csv
 import gzip
 import io
 import lzma
+import os
 import re
 import zlib
 from collections import Counter
@@ -167,14 +168,20 @@ def parse_columns(spec: str | dict[str, str] | list[str] | None) -> dict[str, st
 # bytes -> text
 
 
-def _read_bytes(path: Path) -> bytes:
+def _read_bytes(path: Path, ends: int | None = None) -> bytes | tuple[bytes, bytes]:
+    """The file's bytes; with `ends`, only its first `ends` and last `ends // 2` bytes."""
     if path.is_dir():
         raise ValueError(
             f"{path} is a directory, not a log file; give one file (calib-jax batch calibrates "
             "every log in a folder)"
         )
     try:
-        return path.read_bytes()
+        if ends is None:
+            return path.read_bytes()
+        with open(path, "rb") as fh:
+            head = fh.read(ends)
+            fh.seek(max(0, os.fstat(fh.fileno()).st_size - ends // 2))
+            return head, fh.read()
     except PermissionError as e:
         raise ValueError(
             f"{path} cannot be read: permission denied ({e.strerror}); make it readable "
@@ -213,8 +220,11 @@ def _binary(path: Path, what: str) -> ValueError:
     )
 
 
-def _decode(raw: bytes, path: Path, notes: list[str]) -> tuple[str, str]:
-    """The text and the codec name that decodes it (for np.loadtxt to read the file itself)."""
+def _decode(raw: bytes, path: Path, notes: list[str], partial: bool = False) -> tuple[str, str]:
+    """The text and the codec name that decodes it (for np.loadtxt to read the file itself).
+
+    `partial`: `raw` is the start of a longer file, possibly cut inside a character.
+    """
     if raw.startswith(b"\x89HDF\r\n\x1a\n"):
         raise _binary(path, "an HDF5 file; read it with h5py")
     if raw.startswith(b"PK\x03\x04"):
@@ -245,7 +255,12 @@ def _decode(raw: bytes, path: Path, notes: list[str]) -> tuple[str, str]:
             notes.append("text encoded as UTF-16 without a byte-order mark")
     if enc is None:
         try:
-            text = raw.decode("utf-8")
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                if not (partial and e.start >= len(raw) - 3):
+                    raise
+                text = raw[: e.start].decode("utf-8")  # cut inside the last character
             enc = "utf-8"
         except UnicodeDecodeError:
             enc = "latin-1"
@@ -370,19 +385,46 @@ def _parse_rows(
     return out, bad
 
 
-def _read_text(path: Path, raw: bytes, on_disk: bool, notes: list[str]) -> _Table:
+def _tail_codec(enc: str, head: bytes) -> str:
+    if enc == "utf-8-sig":
+        return "utf-8"
+    if enc in ("utf-16", "utf-32"):
+        le = head.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF16_LE))
+        return enc + ("-le" if le else "-be")
+    return enc
+
+
+def _read_text(
+    path: Path, raw: bytes, on_disk: bool, notes: list[str], tail_raw: bytes | None = None
+) -> _Table:
     """Header (or None), a float matrix and preamble key/values; bad rows skipped and counted.
 
     A preamble of ``key,value`` lines before the header (``Fs,50.00``) is returned as a dict;
     the header is the text line (no numbers) just before the first data row, with as many
     fields as the data rows have (rows of numbers in between are ragged data, skipped).
+
+    With `tail_raw`, `raw` is only the start of a big file on disk and `tail_raw` its end: a
+    clean file then goes from disk to numpy's parser without being decoded here.
     """
-    text, enc = _decode(raw, path, notes)
-    whole = len(text) <= _HEAD_CHARS + _TAIL_CHARS
+    big = tail_raw is not None
+    text, enc = _decode(raw, path, notes, partial=big)
+    cache = {"text": None if big else text}
+
+    def whole_text() -> str:
+        if cache["text"] is None:
+            more: list[str] = []
+            cache["text"], _ = _decode(_read_bytes(path), path, more)
+            notes.extend(n for n in more if n not in notes)
+        return cache["text"]
+
+    whole = not big and len(text) <= _HEAD_CHARS + _TAIL_CHARS
     head = _split_lines(text if whole else text[:_HEAD_CHARS])
     if not whole:
         head = head[:-1]  # cut mid-line
-    tail = head if whole else _split_lines(text[-_TAIL_CHARS:])[1:]
+    if big:
+        tail = _split_lines(tail_raw.decode(_tail_codec(enc, raw), errors="replace"))[1:]
+    else:
+        tail = head if whole else _split_lines(text[-_TAIL_CHARS:])[1:]
     sample = [ln for ln in tail if not _skip(ln)]
     if not sample:
         if not text.strip():
@@ -427,7 +469,7 @@ def _read_text(path: Path, raw: bytes, on_disk: bool, notes: list[str]) -> _Tabl
         None,
     )
     if start is None and not whole:
-        lines = _split_lines(text)
+        lines = _split_lines(whole_text())
         start = next(
             (
                 i
@@ -520,7 +562,7 @@ def _read_text(path: Path, raw: bytes, on_disk: bool, notes: list[str]) -> _Tabl
         except (ValueError, OSError):  # UnicodeError is a ValueError
             data = None
     if data is None:
-        body = [ln for ln in _split_lines(text)[start:] if not _skip(ln)]
+        body = [ln for ln in _split_lines(whole_text())[start:] if not _skip(ln)]
         data, more = _parse_rows(body, delim, width, dec, trailing)
         bad += more
     return _Table(header, data, bad, preamble, odd_header)
@@ -662,14 +704,31 @@ def load_log(
     """
     if sensor not in _SENSORS:
         raise ValueError(f"sensor={sensor!r}: use 'accel', 'mag', 'gyro' or None")
-    if sample_rate is not None and not (np.isfinite(sample_rate) and sample_rate > 0):
+    try:
+        rate_ok = sample_rate is None or (np.isfinite(sample_rate) and sample_rate > 0)
+    except TypeError:
+        rate_ok = False
+    if not rate_ok:
         raise ValueError(f"sample rate {sample_rate!r} Hz: give a positive number")
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path} does not exist")
     mapping = parse_columns(columns)
     notes: list[str] = []
-    raw = _read_bytes(path)
+    raw = _read_bytes(path, ends=_HEAD_CHARS)
+    big = len(raw[1]) == _HEAD_CHARS // 2 and len(raw[0]) == _HEAD_CHARS
+    lazy = (
+        big
+        and path.suffix.lower() != ".mat"
+        and not any(raw[0].startswith(m) for m, *_ in _COMPRESSED)
+        and not _is_mat(raw[0], path)
+    )
+    if lazy:
+        # a big file that is not compressed and not a MAT file: read its ends only, numpy's
+        # parser reads the rest from disk
+        tab = _read_text(path, raw[0], True, notes, tail_raw=raw[1])
+        return _assemble(path, tab, mapping, sensor, sample_rate, notes)
+    raw = raw[0] if not big else _read_bytes(path)
     if not raw:
         raise ValueError(f"{path} is empty (0 bytes): nothing to calibrate")
     raw, compressed = _decompress(raw, path, notes)
@@ -680,6 +739,18 @@ def load_log(
         tab = _read_mat(raw, path, notes)
     else:
         tab = _read_text(path, raw, not compressed, notes)
+    return _assemble(path, tab, mapping, sensor, sample_rate, notes)
+
+
+def _assemble(
+    path: Path,
+    tab: _Table,
+    mapping: dict[str, str] | None,
+    sensor: str | None,
+    sample_rate: float | None,
+    notes: list[str],
+) -> SensorLog:
+    """Columns to sensors: the header, --columns or the headerless guess; notes on the cells."""
     header, data, preamble = tab.header, tab.data, tab.preamble
     width = data.shape[1]
     if preamble:
