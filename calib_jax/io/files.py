@@ -552,7 +552,10 @@ def _read_text(
         # the fast path: numpy's C parser on the rows (reading the file itself when nothing had
         # to be decompressed); it refuses ragged rows and non-numbers, which go line by line
         try:
-            if on_disk:  # our own handle: numpy would decompress by the name, or fetch URLs
+            if on_disk and path.suffix.lower() not in (".gz", ".bz2", ".xz", ".lzma", ".zip"):
+                # numpy opening the file itself is ~10 % faster than reading our handle
+                block = _loadtxt(str(path), delim, start, enc)
+            elif on_disk:  # our own handle: numpy would decompress by the name
                 with open(path, encoding=enc, newline=None) as fh:
                     block = _loadtxt(fh, delim, start)
             else:
@@ -568,9 +571,16 @@ def _read_text(
     return _Table(header, data, bad, preamble, odd_header)
 
 
-def _loadtxt(src, delim: str | None, skip: int) -> np.ndarray:
+def _loadtxt(src, delim: str | None, skip: int, enc: str | None = None) -> np.ndarray:
     return np.loadtxt(
-        src, delimiter=delim, skiprows=skip, ndmin=2, dtype=float, quotechar='"', comments="#"
+        src,
+        delimiter=delim,
+        skiprows=skip,
+        ndmin=2,
+        dtype=float,
+        quotechar='"',
+        comments="#",
+        encoding=enc,
     )
 
 
@@ -839,7 +849,10 @@ def _assemble(
             raise ValueError(
                 f"{path}: found some but not all of {keys}; map {missing} with --columns"
             )
-        return data[:, [source[k] for k in keys]]
+        cols = [source[k] for k in keys]
+        if cols[1] == cols[0] + 1 and cols[2] == cols[0] + 2:
+            return data[:, cols[0] : cols[0] + 3]  # a view: no copy of a big log
+        return data[:, cols]
 
     acc, gyro, mag = triple("a"), triple("g"), triple("m")
     if acc is None and mag is None and gyro is None:
@@ -855,11 +868,14 @@ def _assemble(
     temp = data[:, source["temp"]].copy() if "temp" in source else None
     # cells the caller will have to drop, counted per column it uses (one pass over them all)
     used = [c for c in _CANON if c in source]
-    sub = data[:, [source[c] for c in used]]
-    with np.errstate(invalid="ignore"):
-        n_inf = np.isinf(sub).sum(axis=0)
-        n_bad = np.isnan(sub).sum(axis=0) + n_inf
-        n_huge = (np.abs(sub) > _HUGE).sum(axis=0) - n_inf
+    idx = [source[c] for c in used]
+    if data.size and np.isfinite(data).all() and max(-data.min(), data.max()) <= _HUGE:
+        n_bad = n_huge = [0] * len(idx)  # the usual case, in two quick passes
+    else:
+        with np.errstate(invalid="ignore"):  # boolean passes only: no float temporaries
+            n_inf = np.isinf(data).sum(axis=0)[idx]
+            n_bad = np.isnan(data).sum(axis=0)[idx] + n_inf
+            n_huge = ((data > _HUGE).sum(axis=0) + (data < -_HUGE).sum(axis=0))[idx] - n_inf
     bad_cells = [f"{c} {n}" for c, n in zip(used, n_bad, strict=True) if n]
     huge_cells = [f"{c} {n}" for c, n in zip(used, n_huge, strict=True) if n]
     if bad_cells:
