@@ -290,9 +290,12 @@ def _split_lines(text: str) -> list[str]:
     return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
 
 
+_COMMENTS = ("#", "%", "//")
+
+
 def _skip(line: str) -> bool:
     s = line.strip()
-    return not s or s.startswith(("#", "%", "//"))
+    return not s or s.startswith(_COMMENTS)
 
 
 def _num(cell: str) -> bool:
@@ -362,26 +365,50 @@ def _parse_rows(
     if trailing:
         rows = [ln.rstrip()[:-1] if ln.rstrip().endswith(delim) else ln for ln in rows]
     rows = [ln.split("#", 1)[0] if "#" in ln else ln for ln in rows]
-    widths = [len(_cells(ln, delim)) for ln in rows]
+    if delim is None:
+        widths = [len(ln.split()) for ln in rows]
+    else:
+        widths = [ln.count(delim) + 1 for ln in rows]
     good = [ln for ln, w in zip(rows, widths, strict=True) if w == width]
     bad = len(rows) - len(good)
     out = np.full((len(good), width), np.nan)
-    step = 4096
-    for lo in range(0, len(good), step):
-        chunk = good[lo : lo + step]
-        try:
-            block = np.loadtxt(chunk, delimiter=delim, ndmin=2, dtype=float, quotechar='"')
-            if block.shape == (len(chunk), width):
-                out[lo : lo + len(chunk)] = block
-                continue
-        except ValueError:
-            pass
-        for i, ln in enumerate(chunk):
+
+    def by_line(lo: int, lines: list[str]) -> None:
+        for i, ln in enumerate(lines):
             for j, c in enumerate(_cells(ln, delim)):
                 try:
                     out[lo + i, j] = float(_strip_cell(c))
                 except ValueError:
                     pass  # not a number (a label, an empty cell): NaN, counted by the caller
+
+    def fast(lo: int, lines: list[str]) -> int | None:
+        """Parse with numpy; None when done, else the row numpy stopped at (or -1)."""
+        try:
+            block = _loadtxt(lines, delim, 0)
+        except ValueError as e:
+            m = re.search(r"at row (\d+)", str(e))  # numpy names the bad row: a hint only
+            return int(m.group(1)) if m else -1
+        if block.shape != (len(lines), width):
+            return -1
+        out[lo : lo + len(lines)] = block
+        return None
+
+    step = 4096
+    for lo in range(0, len(good), step):
+        chunk = good[lo : lo + step]
+        i, tries = 0, 0
+        while i < len(chunk):
+            k = fast(lo + i, chunk[i:])
+            if k is None:
+                break
+            tries += 1
+            if not 0 <= k < len(chunk) - i or tries > 64:
+                by_line(lo + i, chunk[i:])  # no usable hint: the rest of the chunk line by line
+                break
+            if k and fast(lo + i, chunk[i : i + k]) is not None:
+                by_line(lo + i, chunk[i : i + k])
+            by_line(lo + i + k, chunk[i + k : i + k + 1])
+            i += k + 1
     return out, bad
 
 
@@ -565,7 +592,11 @@ def _read_text(
         except (ValueError, OSError):  # UnicodeError is a ValueError
             data = None
     if data is None:
-        body = [ln for ln in _split_lines(whole_text())[start:] if not _skip(ln)]
+        body = [
+            ln
+            for ln in _split_lines(whole_text())[start:]
+            if (s := ln.lstrip()) and not s.startswith(_COMMENTS)
+        ]
         data, more = _parse_rows(body, delim, width, dec, trailing)
         bad += more
     return _Table(header, data, bad, preamble, odd_header)
