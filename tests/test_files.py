@@ -164,9 +164,10 @@ def test_preamble_title_and_comments(tmp_path):
     )
     log = load_log(_write(tmp_path, text))
     assert log.sample_rate == 50.0 and log.mag.shape == (8, 3)
-    text = "Sensor log 2024\n" + _table(ROWS[:, :4], " ")
-    log = load_log(_write(tmp_path, text, "t.txt"))
-    assert any("before the data ignored" in n for n in log.notes) and log.acc.shape == (8, 3)
+    for title in ("Sensor log 2024", "Xsens raw log"):  # a title is not a header
+        log = load_log(_write(tmp_path, title + "\n" + _table(ROWS[:, :4], " "), "t.txt"))
+        assert any("before the data ignored" in n for n in log.notes)
+        np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
 
 
 def test_trailing_separator_and_quoted_cells(tmp_path):
@@ -221,7 +222,9 @@ def test_clean_files_take_numpys_parser(tmp_path, monkeypatch):
         np.testing.assert_allclose(log.gyro, x[:, 4:7], rtol=1e-15)
 
 
-@pytest.mark.parametrize("case", ["clean", "utf16", "latin1_late", "ragged_late", "long_preamble"])
+@pytest.mark.parametrize(
+    "case", ["clean", "utf16", "latin1_late", "ragged_late", "long_preamble", "comment_tail"]
+)
 def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
     # files over 64 kB are sniffed from their first and last bytes and parsed by numpy from
     # disk; whatever that path cannot take must fall back to the whole text and agree
@@ -239,6 +242,8 @@ def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
         lines[5000] = "1,2"
     elif case == "long_preamble":
         head = [f"# note {i} " + "x" * 60 for i in range(1200)] + ["Fs,100"] + head
+    if case == "comment_tail":
+        lines += ["# end of log " + "-" * 40] * 1500
     p = _write(tmp_path, "\n".join(head + lines) + "\n", encoding=enc)
     assert p.stat().st_size > 70_000
     log = load_log(p)

@@ -453,6 +453,8 @@ def _read_text(
     else:
         tail = head if whole else _split_lines(text[-_TAIL_CHARS:])[1:]
     sample = [ln for ln in tail if not _skip(ln)]
+    if len(sample) < 20 and tail is not head:  # the end is mostly comments: use the start too
+        sample = [ln for ln in head if not _skip(ln)] + sample
     if not sample:
         if not text.strip():
             raise ValueError(f"{path} is empty: no rows to read")
@@ -531,8 +533,8 @@ def _read_text(
                 header_rows.append((j, names))
                 j -= 1
                 continue  # a units line under the names: look one further up
-            if not header_rows and len(names) >= 2:
-                odd_header = names
+            if not header_rows and len(names) >= 2 and any(map(canonical_name, names)):
+                odd_header = names  # a header, by its names, that does not fit the rows
             stop = j + 1
             break
         if header_rows:
