@@ -262,9 +262,13 @@ def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
 # ---------------------------------------------------------------- clear errors
 
 
-def test_directory(tmp_path):
+def test_directory_or_pipe(tmp_path):
     with pytest.raises(ValueError, match="is a directory"):
         load_log(tmp_path)
+    fifo = tmp_path / "pipe.csv"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match="not a regular file"):
+        load_log(fifo)
 
 
 def test_missing_file(tmp_path):

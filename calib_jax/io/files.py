@@ -175,6 +175,8 @@ def _read_bytes(path: Path, ends: int | None = None) -> bytes | tuple[bytes, byt
             f"{path} is a directory, not a log file; give one file (calib-jax batch calibrates "
             "every log in a folder)"
         )
+    if not path.is_file():  # a pipe or a device would be read forever
+        raise ValueError(f"{path} is not a regular file (a pipe or a device?); give a log file")
     try:
         if ends is None:
             return path.read_bytes()
