@@ -223,7 +223,17 @@ def test_clean_files_take_numpys_parser(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize(
-    "case", ["clean", "utf16", "latin1_late", "ragged_late", "long_preamble", "comment_tail"]
+    "case",
+    [
+        "clean",
+        "utf16",
+        "latin1_late",
+        "ragged_late",
+        "long_preamble",
+        "comment_tail",
+        "labels",
+        "empty_tail",
+    ],
 )
 def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
     # files over 64 kB are sniffed from their first and last bytes and parsed by numpy from
@@ -242,6 +252,13 @@ def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
         lines[5000] = "1,2"
     elif case == "long_preamble":
         head = [f"# note {i} " + "x" * 60 for i in range(1200)] + ["Fs,100"] + head
+    if case == "labels":  # a label column (imucal's 'part'), and one text cell in a sensor
+        lines = [f"pose_{i // 500}," + ln for i, ln in enumerate(lines)]
+        head = ["part,t,ax,ay,az"]
+        lines[3000] = lines[3000].replace(",-1", ",oops")
+    if case == "empty_tail":  # a column that ends empty is still parsed where it has numbers
+        lines = [ln + ("," if i > n - 300 else ",7") for i, ln in enumerate(lines)]
+        head = ["t,ax,ay,az,temp"]
     if case == "comment_tail":
         lines += ["# end of log " + "-" * 40] * 1500
     p = _write(tmp_path, "\n".join(head + lines) + "\n", encoding=enc)
@@ -251,6 +268,11 @@ def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
     if case in ("latin1_late", "ragged_late"):
         keep[5000] = False
         assert any(s_.startswith("1 rows had the wrong number") for s_ in log.notes)
+    if case == "labels":
+        assert np.isnan(log.acc[3000, 2]) and "az 1" in log.notes[-1]
+        log.acc[3000, 2] = -1
+    if case == "empty_tail":
+        assert np.all(log.temp[: n - 300] == 7) and np.isnan(log.temp[-1])
     np.testing.assert_array_equal(log.acc, x[keep, 1:4])
     np.testing.assert_array_equal(log.t, x[keep, 0])
     if case == "latin1_late":

@@ -320,13 +320,17 @@ _DELIMS = ("\t", ";", ",", "|", None)
 _DELIM_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
 
 
-def _sniff(lines: list[str]) -> tuple[str | None, bool, int, bool]:
+def _sniff(lines: list[str], head: list[str] = ()) -> tuple[str | None, bool, int, bool]:
     """Separator, decimal commas, the usual row width, and whether rows end in a separator."""
     best = (0.0, 0, None, False, 0, False)
     for rank, d in enumerate(_DELIMS):
         rows = [[_strip_cell(c) for c in _cells(ln, d)] for ln in lines]
         # a separator ending most rows ('1,2,3,') does not start an empty last column
-        trailing = d is not None and 2 * sum(ln.rstrip().endswith(d) for ln in lines) > len(lines)
+        # (in 9 of 10 rows at both ends: an empty last column at the end of a log is not one)
+        trailing = d is not None and all(
+            10 * sum(ln.rstrip().endswith(d) for ln in part) >= 9 * len(part)
+            for part in (lines, head or lines)
+        )
         if trailing:
             rows = [r[:-1] if len(r) > 1 and r[-1] == "" else r for r in rows]
         counts = Counter(len(r) for r in rows)
@@ -359,9 +363,17 @@ class _Table:
 
 
 def _parse_rows(
-    rows: list[str], delim: str | None, width: int, dec: bool, trailing: bool
+    rows: list[str],
+    delim: str | None,
+    width: int,
+    dec: bool,
+    trailing: bool,
+    text_cols: frozenset[int] = frozenset(),
 ) -> tuple[np.ndarray, int]:
-    """A float matrix of the rows with `width` fields (others skipped and counted)."""
+    """A float matrix of the rows with `width` fields (others skipped and counted).
+
+    `text_cols`: columns of labels (no numbers in the sample), left NaN without parsing.
+    """
     if dec:
         rows = [ln.replace(",", ".") for ln in rows]
     if trailing:
@@ -386,14 +398,17 @@ def _parse_rows(
     def fast(lo: int, lines: list[str]) -> int | None:
         """Parse with numpy; None when done, else the row numpy stopped at (or -1)."""
         try:
-            block = _loadtxt(lines, delim, 0)
+            block = _loadtxt(lines, delim, 0, usecols=numeric)
         except ValueError as e:
             m = re.search(r"at row (\d+)", str(e))  # numpy names the bad row: a hint only
             return int(m.group(1)) if m else -1
-        if block.shape != (len(lines), width):
+        if block.shape != (len(lines), len(numeric)):
             return -1
-        out[lo : lo + len(lines)] = block
+        out[lo : lo + len(lines), numeric] = block
         return None
+
+    # the rows all have `width` fields here, so numpy may skip the label columns
+    numeric = [j for j in range(width) if j not in text_cols]
 
     step = 4096
     for lo in range(0, len(good), step):
@@ -463,7 +478,8 @@ def _read_text(
         raise ValueError(f"{path} has no data rows (only blank or comment lines)")
     sample = sample[-200:] if len(sample) > 200 else sample
     try:
-        delim, dec, width, trailing = _sniff(sample)
+        first_rows = [ln for ln in head[:300] if not _skip(ln) and any(map(str.isdigit, ln))]
+        delim, dec, width, trailing = _sniff(sample, first_rows[:100])
     except ValueError:
         first = next((ln for ln in head if not _skip(ln)), "")
         raise ValueError(
@@ -601,12 +617,23 @@ def _read_text(
             for ln in _split_lines(whole_text())[start:]
             if (s := ln.lstrip()) and not s.startswith(_COMMENTS)
         ]
-        data, more = _parse_rows(body, delim, width, dec, trailing)
+        # label columns: a word in every cell of the first and the last rows (an empty cell or
+        # one number and the column is parsed)
+        rows = [split(ln) for ln in lines[start : start + 50] + sample if not _skip(ln)]
+        rows = [r for r in rows if len(r) == width]
+        text_cols = frozenset(
+            j
+            for j in range(width)
+            if len(rows) >= 5 and all(_strip_cell(r[j]) and not num(r[j]) for r in rows)
+        )
+        data, more = _parse_rows(body, delim, width, dec, trailing, text_cols)
         bad += more
     return _Table(header, data, bad, preamble, odd_header)
 
 
-def _loadtxt(src, delim: str | None, skip: int, enc: str | None = None) -> np.ndarray:
+def _loadtxt(
+    src, delim: str | None, skip: int, enc: str | None = None, usecols: list[int] | None = None
+) -> np.ndarray:
     return np.loadtxt(
         src,
         delimiter=delim,
@@ -616,6 +643,7 @@ def _loadtxt(src, delim: str | None, skip: int, enc: str | None = None) -> np.nd
         quotechar='"',
         comments="#",
         encoding=enc,
+        usecols=usecols,
     )
 
 
