@@ -359,7 +359,6 @@ class _Table:
     bad: int = 0
     preamble: dict[str, float] = field(default_factory=dict)
     odd_header: list[str] | None = None
-    notes: list[str] = field(default_factory=list)
 
 
 def _parse_rows(
