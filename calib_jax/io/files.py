@@ -901,6 +901,35 @@ def _assemble(
             "to override"
         )
 
+    # cells the caller will have to drop, counted per column it uses. A finite value beyond
+    # 1e150 is no reading (a corrupt cell: its square overflows any sum); it is read as +-inf
+    # so that it is dropped with the other non-finite cells instead of wrecking a fit.
+    used = [c for c in _CANON if c in source]
+    idx = [source[c] for c in used]
+    if data.size and np.isfinite(data).all() and max(-data.min(), data.max()) <= _HUGE:
+        n_bad = n_huge = [0] * len(idx)  # the usual case, in two quick passes
+    else:
+        with np.errstate(invalid="ignore"):  # boolean passes only: no float temporaries
+            n_bad = (~np.isfinite(data)).sum(axis=0)[idx]
+            huge = (data > _HUGE) | (data < -_HUGE)
+            huge &= np.isfinite(data)
+        n_huge = huge.sum(axis=0)[idx]
+        if huge.any():
+            data = data.copy() if not data.flags.writeable else data
+            data[huge] = np.copysign(np.inf, data[huge])
+    bad_cells = [f"{c} {n}" for c, n in zip(used, n_bad, strict=True) if n]
+    huge_cells = [f"{c} {n}" for c, n in zip(used, n_huge, strict=True) if n]
+    if bad_cells:
+        notes.append(
+            "cells that are not finite numbers (NaN, inf, empty or text), kept for the "
+            "calibration to drop: " + ", ".join(bad_cells)
+        )
+    if huge_cells:
+        notes.append(
+            f"cells beyond +-{_HUGE:g}, which no sensor reads (a corrupt cell?), read as +-inf "
+            "for the calibration to drop: " + ", ".join(huge_cells)
+        )
+
     def triple(prefix: str) -> np.ndarray | None:
         keys = [prefix + a for a in "xyz"]
         have = [k in source for k in keys]
@@ -928,28 +957,6 @@ def _assemble(
         )
     t = data[:, source["t"]].copy() if "t" in source else None
     temp = data[:, source["temp"]].copy() if "temp" in source else None
-    # cells the caller will have to drop, counted per column it uses (one pass over them all)
-    used = [c for c in _CANON if c in source]
-    idx = [source[c] for c in used]
-    if data.size and np.isfinite(data).all() and max(-data.min(), data.max()) <= _HUGE:
-        n_bad = n_huge = [0] * len(idx)  # the usual case, in two quick passes
-    else:
-        with np.errstate(invalid="ignore"):  # boolean passes only: no float temporaries
-            n_inf = np.isinf(data).sum(axis=0)[idx]
-            n_bad = np.isnan(data).sum(axis=0)[idx] + n_inf
-            n_huge = ((data > _HUGE).sum(axis=0) + (data < -_HUGE).sum(axis=0))[idx] - n_inf
-    bad_cells = [f"{c} {n}" for c, n in zip(used, n_bad, strict=True) if n]
-    huge_cells = [f"{c} {n}" for c, n in zip(used, n_huge, strict=True) if n]
-    if bad_cells:
-        notes.append(
-            "cells that are not finite numbers (NaN, inf, empty or text), kept for the "
-            "calibration to drop: " + ", ".join(bad_cells)
-        )
-    if huge_cells:
-        notes.append(
-            f"cells beyond +-{_HUGE:g}, which no sensor reads (a corrupt file?), kept as read: "
-            + ", ".join(huge_cells)
-        )
     rate = sample_rate
     if rate is None:
         rate = next((preamble[k] for k in _RATE_KEYS if k in preamble), None)
