@@ -74,8 +74,9 @@ def test_accel_solver_choice(tmp_path):
 
 
 def test_bad_input_exits_2_with_the_fix(tmp_path, capsys):
-    bad = tmp_path / "seven.txt"
-    bad.write_text("\n".join(" ".join(["1"] * 7) for _ in range(10)))
+    # 8 headerless columns: no usual layout has that width (7 is read as t + accel + gyro)
+    bad = tmp_path / "eight.txt"
+    bad.write_text("\n".join(" ".join(["1"] * 8) for _ in range(10)))
     assert main(["accel", str(bad)]) == 2
     assert "--columns" in capsys.readouterr().err
     ferraris = shared_file("imucal_ferraris/example_ferraris_session.csv")

@@ -2,25 +2,43 @@
 
 Supported:
 
-* CSV, TSV or whitespace-separated text with a header row. Column names are matched
-  case-insensitively, ignoring units in brackets (``t[s]``) and separators: ``t``/``time``/
+* CSV, TSV, semicolon-, pipe- or whitespace-separated text with a header row. Column names are
+  matched case-insensitively, ignoring units in brackets (``t[s]``) and separators: ``t``/``time``/
   ``timestamp``; ``ax ay az`` (also ``acc_x``, ``accx``, ``a_x``); ``gx gy gz`` (``gyr_x``,
   ``gyro_x``); ``mx my mz`` (``mag_x``); ``temp``/``temperature``. Other names are mapped with
-  ``columns``.
+  ``columns``. A preamble of ``key,value`` lines before the header (``Fs,50.00``) is read for the
+  sample rate.
 * Headerless numeric text with a ``columns`` mapping such as ``"t,ax,ay,az"`` (the imu_tk
-  files). Without a mapping, 3 columns are read as ``ax ay az`` and 4 as ``t ax ay az``;
-  anything else is an error that asks for the mapping.
+  files). Without a mapping the width decides, and a note names the guess: 3 columns are
+  ``ax ay az`` (``mx my mz`` with ``sensor="mag"``, ``gx gy gz`` with ``sensor="gyro"``), 4 are
+  ``t`` and those, 6 ``ax ay az gx gy gz`` (``ax ay az mx my mz`` with ``sensor="mag"``), 7 ``t``
+  and those, 9 ``ax ay az gx gy gz mx my mz`` and 10 ``t`` and those; any other width is an error
+  that asks for the mapping.
+* UTF-8 (with or without a byte-order mark), UTF-16/32 with a byte-order mark, Latin-1; gzip,
+  bzip2 or xz compression (found by the file's first bytes, not its name); decimal commas
+  (``1,234;0,998``) when the separator is not a comma. Each of these adds a note.
 * MATLAB .mat (real binary MAT files through scipy.io; imu_tk's ``.mat`` files are text and
-  are read as text).
+  are read as text): variables named like columns (``ax``, ``acc_x``, ...), N x 3 matrices
+  named for a sensor (``acc``, ``gyro``, ``mag``) or one N x k matrix read like headerless text.
 
-Nothing here modifies the file; rows that cannot be used are counted, never rewritten.
+Rows with the wrong number of fields are skipped and counted; cells that are not numbers become
+NaN and, with inf and absurd magnitudes, are counted per column in the notes (dropping them is the
+caller's job). Whatever cannot be read raises ValueError saying what was found and what to change.
+Nothing here modifies the file.
 """
 
 from __future__ import annotations
 
+import bz2
+import codecs
 import csv
+import gzip
 import io
+import lzma
+import os
 import re
+import zlib
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,16 +54,24 @@ _ALIASES = {
     "temp": "temp",
     "temperature": "temp",
 }
-for _k, _names in {
+_SENSOR_NAMES = {
     "a": ("a", "acc", "accel", "accelerometer", "acceleration"),
     "g": ("g", "gyr", "gyro", "gyroscope", "w"),
     "m": ("m", "mag", "magn", "magnetometer"),
-}.items():
+}
+for _k, _names in _SENSOR_NAMES.items():
     for _n in _names:
         for _ax in "xyz":
             _ALIASES[f"{_n}{_ax}"] = f"{_k}{_ax}"
             if len(_n) > 1:
                 _ALIASES[f"{_ax}{_n}"] = f"{_k}{_ax}"
+# an N x 3 MATLAB variable named for a sensor ('acc', 'gyro', 'mag') holds its x, y, z
+_MATRIX_NAMES = {n: k for k, names in _SENSOR_NAMES.items() for n in names if len(n) > 1}
+
+_SENSORS = {None: "a", "accel": "a", "acc": "a", "mag": "m", "gyro": "g"}
+_HUGE = 1e150  # no sensor reads this; its square overflows float64 sums
+_HEAD_CHARS = 1 << 16  # the start of the file searched for the header
+_TAIL_CHARS = 1 << 15  # the end of the file sampled for the separator and the row width
 
 
 def _clean(name: str) -> str:
@@ -86,17 +112,28 @@ def parse_columns(spec: str | dict[str, str] | list[str] | None) -> dict[str, st
 
     ``"t,ax,ay,az"`` (positional, for headerless files) or ``"ax=AccX,ay=AccY,az=AccZ"``
     (canonical=file name, for headers with other names). Returns {canonical: source}, where the
-    source of a positional mapping is the column index as a string.
+    source of a positional mapping is the column index as a string. Raises ValueError for
+    unknown or repeated names and for empty entries.
     """
     if spec is None:
         return None
     if isinstance(spec, dict):
-        items = spec
+        items = {str(k): str(v) for k, v in spec.items()}
     else:
-        parts = spec.split(",") if isinstance(spec, str) else list(spec)
+        parts = spec.split(",") if isinstance(spec, str) else [str(p) for p in spec]
         parts = [p.strip() for p in parts if p.strip()]
+        if not parts:
+            raise ValueError(
+                f"--columns {spec!r} names no columns; use e.g. 't,ax,ay,az' or "
+                "'ax=AccX,ay=AccY,az=AccZ'"
+            )
         if all("=" in p for p in parts):
-            items = dict(p.split("=", 1) for p in parts)
+            items = {}
+            for p in parts:
+                k, v = p.split("=", 1)
+                if k.strip().lower() in items:
+                    raise ValueError(f"--columns maps {k.strip()!r} twice in {spec!r}")
+                items[k.strip().lower()] = v
         elif any("=" in p for p in parts):
             raise ValueError(
                 f"--columns mixes positional and named entries: {spec!r}; use either "
@@ -107,7 +144,12 @@ def parse_columns(spec: str | dict[str, str] | list[str] | None) -> dict[str, st
             for i, p in enumerate(parts):
                 if p in ("_", "-", "skip"):
                     continue
-                items[p] = str(i)
+                if p.lower() in items:
+                    raise ValueError(
+                        f"--columns names {p!r} twice in {spec!r}; each column once ('_' skips "
+                        "a column)"
+                    )
+                items[p.lower()] = str(i)
     out = {}
     for k, v in items.items():
         canon = k.strip().lower()
@@ -116,118 +158,602 @@ def parse_columns(spec: str | dict[str, str] | list[str] | None) -> dict[str, st
                 f"unknown column {k!r} in --columns; use names from {', '.join(_CANON)} "
                 "('_' skips a column)"
             )
+        if not v.strip():
+            raise ValueError(f"--columns gives no file column for {canon!r} in {spec!r}")
         out[canon] = v.strip()
     return out
 
 
-def _sniff_delimiter(first: str) -> str | None:
-    if "\t" in first:
-        return "\t"
-    if "," in first:
-        return ","
-    if ";" in first:
-        return ";"
-    return None  # whitespace
+# ------------------------------------------------------------------------------------------
+# bytes -> text
 
 
-def _is_number(s: str) -> bool:
+def _read_bytes(path: Path, ends: int | None = None) -> bytes | tuple[bytes, bytes]:
+    """The file's bytes; with `ends`, only its first `ends` and last `ends // 2` bytes."""
+    if path.is_dir():
+        raise ValueError(
+            f"{path} is a directory, not a log file; give one file (calib-jax batch calibrates "
+            "every log in a folder)"
+        )
+    if not path.is_file():  # a pipe or a device would be read forever
+        raise ValueError(f"{path} is not a regular file (a pipe or a device?); give a log file")
     try:
-        float(s)
+        if ends is None:
+            return path.read_bytes()
+        with open(path, "rb") as fh:
+            head = fh.read(ends)
+            fh.seek(max(0, os.fstat(fh.fileno()).st_size - ends // 2))
+            return head, fh.read()
+    except PermissionError as e:
+        raise ValueError(
+            f"{path} cannot be read: permission denied ({e.strerror}); make it readable "
+            f"(chmod +r {path}) or run as a user who may read it"
+        ) from None
+    except OSError as e:
+        raise ValueError(f"{path} cannot be read: {e.strerror or e}") from None
+
+
+_COMPRESSED = (
+    (b"\x1f\x8b", "gzip", gzip.decompress, (OSError, EOFError, zlib.error)),
+    (b"BZh", "bzip2", bz2.decompress, (OSError, EOFError, ValueError)),
+    (b"\xfd7zXZ\x00", "xz", lzma.decompress, (lzma.LZMAError, EOFError)),
+)
+
+
+def _decompress(raw: bytes, path: Path, notes: list[str]) -> tuple[bytes, bool]:
+    for magic, name, fn, errors in _COMPRESSED:
+        if raw.startswith(magic) and (name != "bzip2" or raw[3:4].isdigit()):
+            try:
+                out = fn(raw)
+            except errors as e:
+                raise ValueError(
+                    f"{path} is {name}-compressed but does not decompress ({e}); it is probably "
+                    "truncated: copy it again, or decompress it yourself to see what is left"
+                ) from None
+            notes.append(f"{name}-compressed file, decompressed in memory")
+            return out, True
+    return raw, False
+
+
+def _binary(path: Path, what: str) -> ValueError:
+    return ValueError(
+        f"{path} is not a text log ({what}); export it as CSV or text with one row per sample "
+        "(or a MATLAB .mat file)"
+    )
+
+
+def _decode(raw: bytes, path: Path, notes: list[str], partial: bool = False) -> tuple[str, str]:
+    """The text and the codec name that decodes it (for np.loadtxt to read the file itself).
+
+    `partial`: `raw` is the start of a longer file, possibly cut inside a character.
+    """
+    if raw.startswith(b"\x89HDF\r\n\x1a\n"):
+        raise _binary(path, "an HDF5 file; read it with h5py")
+    if raw.startswith(b"PK\x03\x04"):
+        raise _binary(path, "a zip archive, or an Excel/ODF workbook; unzip it or save as CSV")
+    boms = (
+        (codecs.BOM_UTF32_LE, "utf-32", "UTF-32"),
+        (codecs.BOM_UTF32_BE, "utf-32", "UTF-32"),
+        (codecs.BOM_UTF8, "utf-8-sig", "UTF-8 with a byte-order mark"),
+        (codecs.BOM_UTF16_LE, "utf-16", "UTF-16"),
+        (codecs.BOM_UTF16_BE, "utf-16", "UTF-16"),
+    )
+    enc = None
+    for bom, codec, label in boms:
+        if raw.startswith(bom):
+            enc = codec
+            notes.append(f"text encoded as {label}")
+            break
+    if enc is None:
+        sample = raw[:4096]
+        if b"\0" in sample:
+            even, odd = sample[0::2], sample[1::2]
+            if len(sample) >= 4 and odd.count(0) > 0.9 * len(odd) and even.count(0) == 0:
+                enc = "utf-16-le"
+            elif len(sample) >= 4 and even.count(0) > 0.9 * len(even) and odd.count(0) == 0:
+                enc = "utf-16-be"
+            else:
+                raise _binary(path, f"{sample.count(0)} NUL bytes in its first {len(sample)}")
+            notes.append("text encoded as UTF-16 without a byte-order mark")
+    if enc is None:
+        try:
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                if not (partial and e.start >= len(raw) - 3):
+                    raise
+                text = raw[: e.start].decode("utf-8")  # cut inside the last character
+            enc = "utf-8"
+        except UnicodeDecodeError:
+            enc = "latin-1"
+            text = raw.decode("latin-1")
+            notes.append("not valid UTF-8: read as Latin-1 (only header names can differ)")
+    else:
+        text = raw.decode(enc, errors="replace")
+    sample_text = text[:4096]
+    odd_chars = sum(
+        1
+        for ch in sample_text
+        if (ord(ch) < 32 and ch not in "\t\n\r\f\v\x1a") or 0x7F <= ord(ch) < 0xA0 or ch == "\ufffd"
+    )
+    if sample_text and odd_chars > max(2, 0.01 * len(sample_text)):
+        raise _binary(
+            path, f"{odd_chars} control or undecodable characters in its first {len(sample_text)}"
+        )
+    return text, enc
+
+
+# ------------------------------------------------------------------------------------------
+# text -> header, preamble and a float matrix
+
+
+def _split_lines(text: str) -> list[str]:
+    # the line ends np.loadtxt knows (universal newlines), so line numbers agree with skiprows
+    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
+_COMMENTS = ("#", "%", "//")
+
+
+def _skip(line: str) -> bool:
+    s = line.strip()
+    return not s or s.startswith(_COMMENTS)
+
+
+def _num(cell: str) -> bool:
+    try:
+        float(cell)
         return True
     except ValueError:
         return False
 
 
-def _read_text(path: Path) -> tuple[list[str] | None, np.ndarray, int, dict[str, float]]:
-    """Header (or None), a float matrix and preamble key/values; bad rows become NaN rows.
+def _strip_cell(c: str) -> str:
+    return c.strip().strip("\"'").strip()
 
-    A preamble of ``key,value`` lines before the header (``Fs,50.00``) is skipped and returned
-    as a dict; the header is the non-numeric line just before the first numeric row.
+
+def _cells(line: str, delim: str | None) -> list[str]:
+    return line.split() if delim is None else line.split(delim)
+
+
+_DELIMS = ("\t", ";", ",", "|", None)
+_DELIM_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
+
+
+def _sniff(lines: list[str], head: list[str] = ()) -> tuple[str | None, bool, int, bool]:
+    """Separator, decimal commas, the usual row width, and whether rows end in a separator."""
+    best = (0.0, 0, None, False, 0, False)
+    for rank, d in enumerate(_DELIMS):
+        rows = [[_strip_cell(c) for c in _cells(ln, d)] for ln in lines]
+        # a separator ending most rows ('1,2,3,') does not start an empty last column
+        # (in 9 of 10 rows at both ends: an empty last column at the end of a log is not one)
+        trailing = d is not None and all(
+            10 * sum(ln.rstrip().endswith(d) for ln in part) >= 9 * len(part)
+            for part in (lines, head or lines)
+        )
+        if trailing:
+            rows = [r[:-1] if len(r) > 1 and r[-1] == "" else r for r in rows]
+        counts = Counter(len(r) for r in rows)
+        w, nw = max(counts.items(), key=lambda kv: (kv[1], kv[0]))
+        if w < 2:
+            continue
+        cells = [c for r in rows if len(r) == w for c in r if c]
+        if not cells:
+            continue
+        share = nw / len(rows)
+        plain = share * sum(map(_num, cells)) / len(cells)
+        for score, dec in ((plain, False), (0.0, True)):
+            if dec and d != "," and any("," in c for c in cells):
+                score = 0.99 * share * sum(_num(c.replace(",", ".")) for c in cells) / len(cells)
+            if (score, -rank) > (best[0], -best[1]):
+                best = (score, rank, d, dec, w, trailing)
+    if best[0] <= 0:
+        raise ValueError("no rows of numbers found")
+    return best[2], best[3], best[4], best[5]
+
+
+@dataclass
+class _Table:
+    header: list[str] | None
+    data: np.ndarray
+    bad: int = 0
+    preamble: dict[str, float] = field(default_factory=dict)
+    odd_header: list[str] | None = None
+
+
+def _parse_rows(
+    rows: list[str],
+    delim: str | None,
+    width: int,
+    dec: bool,
+    trailing: bool,
+    text_cols: frozenset[int] = frozenset(),
+) -> tuple[np.ndarray, int]:
+    """A float matrix of the rows with `width` fields (others skipped and counted).
+
+    `text_cols`: columns of labels (no numbers in the sample), left NaN without parsing.
     """
-    text = path.read_text(errors="replace")
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise ValueError(f"{path} has no data rows")
-    delim = _sniff_delimiter(lines[-1])
+    if dec:
+        rows = [ln.replace(",", ".") for ln in rows]
+    if trailing:
+        rows = [ln.rstrip()[:-1] if ln.rstrip().endswith(delim) else ln for ln in rows]
+    rows = [ln.split("#", 1)[0] if "#" in ln else ln for ln in rows]
+    if delim is None:
+        widths = [len(ln.split()) for ln in rows]
+    else:
+        widths = [ln.count(delim) + 1 for ln in rows]
+    good = [ln for ln, w in zip(rows, widths, strict=True) if w == width]
+    bad = len(rows) - len(good)
+    out = np.full((len(good), width), np.nan)
+
+    def by_line(lo: int, lines: list[str]) -> None:
+        for i, ln in enumerate(lines):
+            for j, c in enumerate(_cells(ln, delim)):
+                try:
+                    out[lo + i, j] = float(_strip_cell(c))
+                except ValueError:
+                    pass  # not a number (a label, an empty cell): NaN, counted by the caller
+
+    def fast(lo: int, lines: list[str]) -> int | None:
+        """Parse with numpy; None when done, else the row numpy stopped at (or -1)."""
+        try:
+            block = _loadtxt(lines, delim, 0, usecols=numeric)
+        except ValueError as e:
+            m = re.search(r"at row (\d+)", str(e))  # numpy names the bad row: a hint only
+            return int(m.group(1)) if m else -1
+        if block.shape != (len(lines), len(numeric)):
+            return -1
+        out[lo : lo + len(lines), numeric] = block
+        return None
+
+    # the rows all have `width` fields here, so numpy may skip the label columns
+    numeric = [j for j in range(width) if j not in text_cols]
+
+    step = 4096
+    for lo in range(0, len(good), step):
+        chunk = good[lo : lo + step]
+        i, tries = 0, 0
+        while i < len(chunk):
+            k = fast(lo + i, chunk[i:])
+            if k is None:
+                break
+            tries += 1
+            if not 0 <= k < len(chunk) - i or tries > 64:
+                by_line(lo + i, chunk[i:])  # no usable hint: the rest of the chunk line by line
+                break
+            if k and fast(lo + i, chunk[i : i + k]) is not None:
+                by_line(lo + i, chunk[i : i + k])
+            by_line(lo + i + k, chunk[i + k : i + k + 1])
+            i += k + 1
+    return out, bad
+
+
+def _tail_codec(enc: str, head: bytes) -> str:
+    if enc == "utf-8-sig":
+        return "utf-8"
+    if enc in ("utf-16", "utf-32"):
+        le = head.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF16_LE))
+        return enc + ("-le" if le else "-be")
+    return enc
+
+
+def _read_text(
+    path: Path, raw: bytes, on_disk: bool, notes: list[str], tail_raw: bytes | None = None
+) -> _Table:
+    """Header (or None), a float matrix and preamble key/values; bad rows skipped and counted.
+
+    A preamble of ``key,value`` lines before the header (``Fs,50.00``) is returned as a dict;
+    the header is the text line (no numbers) just before the first data row, with as many
+    fields as the data rows have (rows of numbers in between are ragged data, skipped).
+
+    With `tail_raw`, `raw` is only the start of a big file on disk and `tail_raw` its end: a
+    clean file then goes from disk to numpy's parser without being decoded here.
+    """
+    big = tail_raw is not None
+    text, enc = _decode(raw, path, notes, partial=big)
+    cache = {"text": None if big else text}
+
+    def whole_text() -> str:
+        if cache["text"] is None:
+            more: list[str] = []
+            cache["text"], _ = _decode(_read_bytes(path), path, more)
+            notes.extend(n for n in more if n not in notes)
+        return cache["text"]
+
+    whole = not big and len(text) <= _HEAD_CHARS + _TAIL_CHARS
+    head = _split_lines(text if whole else text[:_HEAD_CHARS])
+    if not whole:
+        head = head[:-1]  # cut mid-line
+    if big:
+        tail = _split_lines(tail_raw.decode(_tail_codec(enc, raw), errors="replace"))[1:]
+    else:
+        tail = head if whole else _split_lines(text[-_TAIL_CHARS:])[1:]
+    sample = [ln for ln in tail if not _skip(ln)]
+    if len(sample) < 20 and tail is not head:  # the end is mostly comments: use the start too
+        sample = [ln for ln in head if not _skip(ln)] + sample
+    if not sample:
+        if not text.strip():
+            raise ValueError(f"{path} is empty: no rows to read")
+        raise ValueError(f"{path} has no data rows (only blank or comment lines)")
+    sample = sample[-200:] if len(sample) > 200 else sample
+    try:
+        first_rows = [ln for ln in head[:300] if not _skip(ln) and any(map(str.isdigit, ln))]
+        delim, dec, width, trailing = _sniff(sample, first_rows[:100])
+    except ValueError:
+        first = next((ln for ln in head if not _skip(ln)), "")
+        raise ValueError(
+            f"{path} has no rows of numbers with at least two columns (first line: "
+            f"{first[:80]!r}); a log needs one row per sample, e.g. 't,ax,ay,az' then numbers"
+        ) from None
+    if dec:
+        notes.append(
+            f"decimal commas read as decimal points ({_DELIM_NAMES[delim]}-separated file)"
+        )
+
+    def num(c: str) -> bool:
+        c = _strip_cell(c)
+        return _num(c.replace(",", ".") if dec else c)
 
     def split(line: str) -> list[str]:
-        if delim is None:
-            return line.split()
-        return next(csv.reader(io.StringIO(line), delimiter=delim))
+        cells = _cells(line, delim)
+        if trailing and len(cells) > 1 and not cells[-1].strip():
+            cells = cells[:-1]
+        return cells
 
-    def numeric(cells: list[str]) -> bool:
-        return all(_is_number(c) for c in cells if c.strip())
+    def data_like(cells: list[str]) -> bool:
+        full = [c for c in cells if c.strip()]
+        n = sum(map(num, full))
+        return n >= 1 and 2 * n >= len(full)
 
-    # first numeric row whose width the next row repeats: the data starts there
-    start = 0
-    for i in range(min(len(lines), 64)):
-        cells = split(lines[i])
-        nxt = split(lines[i + 1]) if i + 1 < len(lines) else cells
-        if numeric(cells) and len(nxt) == len(cells):
-            start = i
-            break
-    preamble: dict[str, float] = {}
-    header = None
-    if start > 0:
-        head = split(lines[start - 1])
-        if not numeric(head) and len(head) == len(split(lines[start])):
-            header = [c.strip() for c in head]
-        for line in lines[: start - 1 if header is not None else start]:
-            cells = [c.strip() for c in split(line)]
-            if len(cells) == 2 and _is_number(cells[1]):
-                preamble[cells[0].lower()] = float(cells[1])
-    elif not numeric(split(lines[0])):
-        header = [c.strip() for c in split(lines[0])]
-        start = 1
-    body = lines[start:]
-    width = len(header) if header is not None else len(split(body[0])) if body else 0
-    rows = np.full((len(body), width), np.nan)
+    lines = head
+    start = next(
+        (
+            i
+            for i, ln in enumerate(lines)
+            if not _skip(ln) and len(split(ln)) == width and data_like(split(ln))
+        ),
+        None,
+    )
+    if start is None and not whole:
+        lines = _split_lines(whole_text())
+        start = next(
+            (
+                i
+                for i, ln in enumerate(lines)
+                if not _skip(ln) and len(split(ln)) == width and data_like(split(ln))
+            ),
+            None,
+        )
+    if start is None:
+        raise ValueError(f"{path}: no row of {width} numbers found")
+
+    # walk back from the first data row: ragged rows of numbers, then the header (a text line,
+    # possibly followed by a units line), then the preamble
     bad = 0
-    for i, line in enumerate(body):
-        cells = split(line)
-        if len(cells) != width:
-            bad += 1
+    header_rows: list[tuple[int, list[str]]] = []
+    odd_header = None
+    stop = 0
+    j = start - 1
+    while j >= 0:
+        ln = lines[j]
+        if _skip(ln):
+            j -= 1
             continue
-        # non-numeric cells (a 'part' label column, say) become NaN; the calibration counts
-        # non-finite values in the columns it uses
-        rows[i] = [float(c) if _is_number(c) else np.nan for c in cells]
-    return header, rows, bad, preamble
+        cells = split(ln)
+        full = [c for c in cells if c.strip()]
+        nnum = sum(map(num, full))
+        if nnum == 0 and full:
+            names = _header_cells(ln, delim)
+            while len(names) > width and not names[-1]:
+                names.pop()
+            if len(names) == width:
+                header_rows.append((j, names))
+                j -= 1
+                continue  # a units line under the names: look one further up
+            if not header_rows and len(names) >= 2 and any(map(canonical_name, names)):
+                odd_header = names  # a header, by its names, that does not fit the rows
+            stop = j + 1
+            break
+        if header_rows:
+            stop = j + 1
+            break
+        if len(full) == 2 and not num(full[0]) and num(full[1]) and width != 2:
+            stop = j + 1
+            break  # key,value preamble
+        if data_like(cells):
+            bad += 1  # a ragged row of numbers between the header and the data
+            j -= 1
+            continue
+        stop = j + 1
+        break
+    header = None
+    if header_rows:
+        # the names line is the one with most recognised names; ties go to the upper line
+        best = max(
+            header_rows, key=lambda r: (sum(canonical_name(c) is not None for c in r[1]), r[0] * -1)
+        )
+        header = best[1]
+        others = [r for r in header_rows if r is not best]
+        if others:
+            notes.append(
+                "line(s) under the header skipped: " + "; ".join(",".join(r[1]) for r in others)
+            )
+        stop = min(r[0] for r in header_rows)
+    preamble: dict[str, float] = {}
+    ignored = []
+    for ln in lines[:stop]:
+        if _skip(ln):
+            continue
+        cells = [_strip_cell(c) for c in _cells(ln, delim)]
+        cells = [c for c in cells if c] if delim is not None else cells
+        if len(cells) == 2 and not _num(cells[0]) and num(cells[1]):
+            preamble[cells[0].lower()] = float(cells[1].replace(",", ".") if dec else cells[1])
+        else:
+            ignored.append(ln.strip())
+    if ignored:
+        notes.append(f"{len(ignored)} line(s) before the data ignored (first: {ignored[0][:60]!r})")
+
+    data = None
+    if not dec:
+        # the fast path: numpy's C parser on the rows (reading the file itself when nothing had
+        # to be decompressed); it refuses ragged rows and non-numbers, which go line by line
+        try:
+            if on_disk and path.suffix.lower() not in (".gz", ".bz2", ".xz", ".lzma", ".zip"):
+                # numpy opening the file itself is ~10 % faster than reading our handle
+                block = _loadtxt(str(path), delim, start, enc)
+            elif on_disk:  # our own handle: numpy would decompress by the name
+                with open(path, encoding=enc, newline=None) as fh:
+                    block = _loadtxt(fh, delim, start)
+            else:
+                block = _loadtxt(_split_lines(text)[start:], delim, 0)
+            if block.shape[1] == width:
+                data = block
+        except (ValueError, OSError):  # UnicodeError is a ValueError
+            data = None
+    if data is None:
+        body = [
+            ln
+            for ln in _split_lines(whole_text())[start:]
+            if (s := ln.lstrip()) and not s.startswith(_COMMENTS)
+        ]
+        # label columns: a word in every cell of the first and the last rows (an empty cell or
+        # one number and the column is parsed)
+        rows = [split(ln) for ln in lines[start : start + 50] + sample if not _skip(ln)]
+        rows = [r for r in rows if len(r) == width]
+        text_cols = frozenset(
+            j
+            for j in range(width)
+            if len(rows) >= 5 and all(_strip_cell(r[j]) and not num(r[j]) for r in rows)
+        )
+        data, more = _parse_rows(body, delim, width, dec, trailing, text_cols)
+        bad += more
+    return _Table(header, data, bad, preamble, odd_header)
+
+
+def _loadtxt(
+    src, delim: str | None, skip: int, enc: str | None = None, usecols: list[int] | None = None
+) -> np.ndarray:
+    return np.loadtxt(
+        src,
+        delimiter=delim,
+        skiprows=skip,
+        ndmin=2,
+        dtype=float,
+        quotechar='"',
+        comments="#",
+        encoding=enc,
+        usecols=usecols,
+    )
+
+
+def _header_cells(line: str, delim: str | None) -> list[str]:
+    if delim is None:
+        cells = line.split()
+    else:
+        try:
+            cells = next(csv.reader([line], delimiter=delim))
+        except (csv.Error, StopIteration):
+            cells = line.split(delim)
+    return [_strip_cell(c).lstrip("\ufeff") for c in cells]
 
 
 _RATE_KEYS = ("fs", "sample rate", "sample_rate", "samplerate", "rate", "hz", "frequency")
 
 
-def _read_mat(path: Path) -> tuple[list[str] | None, np.ndarray, int]:
+def _is_mat(raw: bytes, path: Path) -> bool:
+    return raw[:6] == b"MATLAB" and (
+        path.suffix.lower() == ".mat" or raw[126:128] in (b"IM", b"MI")
+    )
+
+
+def _read_mat(raw: bytes, path: Path, notes: list[str]) -> _Table:
     import scipy.io
 
-    mat = scipy.io.loadmat(path)
+    try:
+        mat = scipy.io.loadmat(io.BytesIO(raw))
+    except NotImplementedError:
+        raise ValueError(
+            f"{path} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; in MATLAB save it "
+            "with save(..., '-v7') or export a CSV"
+        ) from None
+    except Exception as e:  # scipy raises many kinds for a damaged file
+        raise ValueError(
+            f"{path} is not a readable MATLAB file ({type(e).__name__}: {e}); it may be "
+            "truncated or corrupt: save or copy it again, or export a CSV"
+        ) from None
     arrays = {
         k: np.asarray(v, float)
         for k, v in mat.items()
-        if not k.startswith("__") and isinstance(v, np.ndarray) and v.dtype.kind in "fiu"
+        if not k.startswith("__")
+        and isinstance(v, np.ndarray)
+        and v.dtype.kind in "fiub"
+        and v.size
     }
-    named = {canonical_name(k): v.ravel() for k, v in arrays.items() if v.size and v.ndim <= 2}
-    named = {k: v for k, v in named.items() if k is not None and v.ndim == 1}
-    if named:
-        n = max(len(v) for v in named.values())
-        names = list(named)
-        return names, np.column_stack([named[k] for k in names if len(named[k]) == n]), 0, {}
+    cols: dict[str, np.ndarray] = {}
+    for k, v in arrays.items():
+        canon = canonical_name(k)
+        if canon is not None and v.ndim <= 2 and min(v.shape or (1,)) == 1 and canon not in cols:
+            cols[canon] = v.ravel()
+        sensor = _MATRIX_NAMES.get(_clean(k))
+        if sensor is not None and v.ndim == 2 and 3 in v.shape:
+            m = v if v.shape[1] == 3 else v.T
+            for i, a in enumerate("xyz"):
+                cols.setdefault(f"{sensor}{a}", m[:, i])
+    if cols:
+        lengths = Counter(len(v) for v in cols.values())
+        n = max(lengths, key=lambda L: (lengths[L], L))
+        left = sorted(k for k, v in cols.items() if len(v) != n)
+        if left:
+            notes.append(
+                "MATLAB variables left out for a different length than the "
+                f"{n} samples of the others: " + ", ".join(f"{k} ({len(cols[k])})" for k in left)
+            )
+        names = [k for k in cols if len(cols[k]) == n]
+        return _Table(names, np.column_stack([cols[k] for k in names]))
     mats = [v for v in arrays.values() if v.ndim == 2 and min(v.shape) >= 3]
     if len(mats) != 1:
+        found = ", ".join(f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items())
         raise ValueError(
-            f"{path}: cannot tell which MATLAB variable holds the data "
-            f"(found {sorted(arrays)}); save one N x k matrix or variables named ax, ay, az"
+            f"{path}: cannot tell which MATLAB variable holds the data (found: "
+            f"{found or 'no numeric variables'}); save one N x k matrix or variables named "
+            "ax, ay, az (or an N x 3 'acc')"
         )
     m = mats[0]
     if m.shape[0] < m.shape[1]:
         m = m.T
-    return None, m, 0, {}
+    return _Table(None, m)
+
+
+def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
+    """Headerless columns by width: the names and the reason given in the note."""
+    p = _SENSORS[sensor]
+    xyz = [p + a for a in "xyz"]
+    if p == "m":
+        six, why6 = ["ax", "ay", "az", "mx", "my", "mz"], "accelerometer then magnetometer"
+    else:
+        six, why6 = ["ax", "ay", "az", "gx", "gy", "gz"], "the usual IMU order"
+    nine = ["ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz"]
+    table = {
+        3: (
+            xyz,
+            f"sensor {sensor}"
+            if sensor
+            else "an accelerometer; pass sensor='mag' or 'gyro' for others",
+        ),
+        4: (["t", *xyz], "the imu_tk layout" if p == "a" else f"sensor {sensor}"),
+        6: (six, why6),
+        7: (["t", *six], why6),
+        9: (nine, "the usual IMU order"),
+        10: (["t", *nine], "the usual IMU order"),
+    }
+    return table.get(width)
 
 
 def load_log(
     path: str | Path,
     columns: str | dict[str, str] | None = None,
     sample_rate: float | None = None,
+    sensor: str | None = None,
 ) -> SensorLog:
     """Load a sensor log (see the module docstring for the formats).
 
@@ -236,55 +762,173 @@ def load_log(
     path : path
         The file.
     columns : str or dict, optional
-        Column mapping, see :func:`parse_columns`.
+        Column mapping, see :func:`parse_columns`; it overrides the header and any guess.
     sample_rate : float, optional
         Hz, when the file has no time column (or to override it).
+    sensor : {"accel", "mag", "gyro"}, optional
+        Which sensor the caller wants: decides how a headerless 3- or 4-column file (and a
+        6- or 7-column one for "mag") is read. A note names every guess.
+
+    Raises
+    ------
+    ValueError
+        For anything that cannot be read, saying what was found and what to change.
     """
+    if sensor not in _SENSORS:
+        raise ValueError(f"sensor={sensor!r}: use 'accel', 'mag', 'gyro' or None")
+    try:
+        rate_ok = sample_rate is None or (np.isfinite(sample_rate) and sample_rate > 0)
+    except TypeError:
+        rate_ok = False
+    if not rate_ok:
+        raise ValueError(f"sample rate {sample_rate!r} Hz: give a positive number")
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path} does not exist")
     mapping = parse_columns(columns)
-    is_binary_mat = path.suffix.lower() == ".mat" and path.read_bytes()[:6] == b"MATLAB"
-    header, data, bad, preamble = _read_mat(path) if is_binary_mat else _read_text(path)
-    notes = []
+    notes: list[str] = []
+    raw = _read_bytes(path, ends=_HEAD_CHARS)
+    big = len(raw[1]) == _HEAD_CHARS // 2 and len(raw[0]) == _HEAD_CHARS
+    lazy = (
+        big
+        and path.suffix.lower() != ".mat"
+        and not any(raw[0].startswith(m) for m, *_ in _COMPRESSED)
+        and not _is_mat(raw[0], path)
+    )
+    if lazy:
+        # a big file that is not compressed and not a MAT file: read its ends only, numpy's
+        # parser reads the rest from disk
+        tab = _read_text(path, raw[0], True, notes, tail_raw=raw[1])
+        return _assemble(path, tab, mapping, sensor, sample_rate, notes)
+    raw = raw[0] if not big else _read_bytes(path)
+    if not raw:
+        raise ValueError(f"{path} is empty (0 bytes): nothing to calibrate")
+    raw, compressed = _decompress(raw, path, notes)
+    if _is_mat(raw, path):
+        tab = _read_mat(raw, path, notes)
+    elif path.suffix.lower() == ".mat" and b"\0" in raw[:4096]:
+        # a binary .mat without the version-5 text header: MATLAB v4
+        tab = _read_mat(raw, path, notes)
+    else:
+        tab = _read_text(path, raw, not compressed, notes)
+    return _assemble(path, tab, mapping, sensor, sample_rate, notes)
+
+
+def _assemble(
+    path: Path,
+    tab: _Table,
+    mapping: dict[str, str] | None,
+    sensor: str | None,
+    sample_rate: float | None,
+    notes: list[str],
+) -> SensorLog:
+    """Columns to sensors: the header, --columns or the headerless guess; notes on the cells."""
+    header, data, preamble = tab.header, tab.data, tab.preamble
+    width = data.shape[1]
     if preamble:
         notes.append("preamble: " + ", ".join(f"{k}={v:g}" for k, v in preamble.items()))
-    if bad:
-        notes.append(f"{bad} rows had the wrong number of fields and were skipped")
+    if tab.bad:
+        notes.append(
+            f"{tab.bad} rows had the wrong number of fields (not {width}) and were skipped"
+        )
+    if len(data) == 0:
+        raise ValueError(f"{path} has a header but no data rows: {header}")
+    if tab.odd_header is not None:
+        if mapping is None or any(not s.isdigit() for s in mapping.values()):
+            raise ValueError(
+                f"{path}: the line {','.join(tab.odd_header)!r} looks like a header with "
+                f"{len(tab.odd_header)} names, but the data rows have {width} fields; fix the "
+                "header or say what the columns are, by position, with --columns (e.g. "
+                f"--columns {_example(width)})"
+            )
+        notes.append(
+            f"header {','.join(tab.odd_header)!r} ignored ({len(tab.odd_header)} names for "
+            f"{width} fields); columns taken by position from --columns"
+        )
+    names = header if header is not None else [str(i) for i in range(width)]
     source: dict[str, int] = {}
     if mapping is not None:
         for canon, src in mapping.items():
             if src.isdigit() and (header is None or src not in header):
-                source[canon] = int(src)
+                j = int(src)
+                if j >= width:
+                    raise ValueError(
+                        f"--columns puts {canon} in column {j + 1}, but {path} has only {width} "
+                        f"columns ({', '.join(names)}); name {width} or fewer, e.g. "
+                        f"--columns {_example(width)}"
+                    )
+                source[canon] = j
             elif header is not None:
                 lowered = [h.lower() for h in header]
-                if src.lower() not in lowered:
+                cleaned = [_clean(h) for h in header]
+                if src.lower() in lowered:
+                    source[canon] = lowered.index(src.lower())
+                elif _clean(src) and _clean(src) in cleaned:
+                    source[canon] = cleaned.index(_clean(src))
+                else:
                     raise ValueError(
-                        f"--columns names {src!r}, which is not in the header {header}"
+                        f"--columns names {src!r} for {canon}, which is not in the header "
+                        f"{header}; use one of those names"
                     )
-                source[canon] = lowered.index(src.lower())
             else:
                 raise ValueError(
-                    f"{path} has no header; give --columns positionally, e.g. 't,ax,ay,az'"
+                    f"{path} has no header, so --columns cannot name columns ({src!r}); give "
+                    f"them by position, e.g. --columns {_example(width)}"
                 )
     if header is not None:
         for j, h in enumerate(header):
             canon = canonical_name(h)
             if canon is not None and canon not in source:
                 source[canon] = j
+            elif canon is not None and mapping is None and source[canon] != j:
+                notes.append(f"column {h!r} also reads as {canon}; the first one is used")
     elif mapping is None:
-        width = data.shape[1]
-        if width == 3:
-            source = {"ax": 0, "ay": 1, "az": 2}
-            notes.append("headerless 3-column file read as ax ay az")
-        elif width == 4:
-            source = {"t": 0, "ax": 1, "ay": 2, "az": 3}
-            notes.append("headerless 4-column file read as t ax ay az (the imu_tk layout)")
-        else:
+        guess = _guess(width, sensor)
+        if guess is None:
+            if width < 3:
+                raise ValueError(
+                    f"{path} has no header and only {width} column(s) per row; a sensor log "
+                    "needs x, y and z (at least 3)"
+                )
             raise ValueError(
                 f"{path} has no header and {width} columns; say what they are with --columns, "
-                "e.g. --columns t,ax,ay,az,gx,gy,gz"
+                f"e.g. --columns {_example(width)} ('_' skips a column)"
             )
+        cols, why = guess
+        source = {c: i for i, c in enumerate(cols)}
+        notes.append(
+            f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
+            "to override"
+        )
+
+    # cells the caller will have to drop, counted per column it uses. A finite value beyond
+    # 1e150 is no reading (a corrupt cell: its square overflows any sum); it is read as +-inf
+    # so that it is dropped with the other non-finite cells instead of wrecking a fit.
+    used = [c for c in _CANON if c in source]
+    idx = [source[c] for c in used]
+    if data.size and np.isfinite(data).all() and max(-data.min(), data.max()) <= _HUGE:
+        n_bad = n_huge = [0] * len(idx)  # the usual case, in two quick passes
+    else:
+        with np.errstate(invalid="ignore"):  # boolean passes only: no float temporaries
+            n_bad = (~np.isfinite(data)).sum(axis=0)[idx]
+            huge = (data > _HUGE) | (data < -_HUGE)
+            huge &= np.isfinite(data)
+        n_huge = huge.sum(axis=0)[idx]
+        if huge.any():
+            data = data.copy() if not data.flags.writeable else data
+            data[huge] = np.copysign(np.inf, data[huge])
+    bad_cells = [f"{c} {n}" for c, n in zip(used, n_bad, strict=True) if n]
+    huge_cells = [f"{c} {n}" for c, n in zip(used, n_huge, strict=True) if n]
+    if bad_cells:
+        notes.append(
+            "cells that are not finite numbers (NaN, inf, empty or text), kept for the "
+            "calibration to drop: " + ", ".join(bad_cells)
+        )
+    if huge_cells:
+        notes.append(
+            f"cells beyond +-{_HUGE:g}, which no sensor reads (a corrupt cell?), read as +-inf "
+            "for the calibration to drop: " + ", ".join(huge_cells)
+        )
 
     def triple(prefix: str) -> np.ndarray | None:
         keys = [prefix + a for a in "xyz"]
@@ -296,25 +940,36 @@ def load_log(
             raise ValueError(
                 f"{path}: found some but not all of {keys}; map {missing} with --columns"
             )
-        return data[:, [source[k] for k in keys]]
+        cols = [source[k] for k in keys]
+        if cols[1] == cols[0] + 1 and cols[2] == cols[0] + 2:
+            return data[:, cols[0] : cols[0] + 3]  # a view: no copy of a big log
+        return data[:, cols]
 
     acc, gyro, mag = triple("a"), triple("g"), triple("m")
     if acc is None and mag is None and gyro is None:
+        if header is not None:
+            eg = ",".join(f"{c}={h}" for c, h in zip(("ax", "ay", "az"), header, strict=False))
+        else:
+            eg = _example(width)
         raise ValueError(
-            f"{path}: no sensor columns recognised in {header}; map them with --columns, "
-            "e.g. --columns ax=AccX,ay=AccY,az=AccZ"
+            f"{path}: no sensor columns recognised in {header if header is not None else names}; "
+            f"map them with --columns, e.g. --columns {eg}"
         )
-    t = data[:, source["t"]] if "t" in source else None
-    temp = data[:, source["temp"]] if "temp" in source else None
+    t = data[:, source["t"]].copy() if "t" in source else None
+    temp = data[:, source["temp"]].copy() if "temp" in source else None
     rate = sample_rate
     if rate is None:
         rate = next((preamble[k] for k in _RATE_KEYS if k in preamble), None)
+        if rate is not None and not (np.isfinite(rate) and rate > 0):
+            notes.append(f"preamble sample rate {rate:g} ignored (not a positive number)")
+            rate = None
     if rate is None and t is not None:
-        dt = np.diff(t[np.isfinite(t)])
-        dt = dt[dt > 0]
-        if dt.size:
-            rate = float(1.0 / np.median(dt))
-    names = header if header is not None else [str(i) for i in range(data.shape[1])]
+        with np.errstate(over="ignore", invalid="ignore"):
+            dt = np.diff(t[np.isfinite(t)])
+            dt = dt[np.isfinite(dt) & (dt > 0)]
+            if dt.size:
+                r = float(1.0 / np.median(dt))
+                rate = r if np.isfinite(r) and r > 0 else None
     return SensorLog(
         acc=acc,
         gyro=gyro,
@@ -326,3 +981,9 @@ def load_log(
         columns={k: names[v] for k, v in source.items()},
         notes=notes,
     )
+
+
+def _example(width: int) -> str:
+    """A positional --columns example with `width` entries."""
+    base = ["t", "ax", "ay", "az"] if width >= 4 else ["ax", "ay", "az"]
+    return ",".join((base + ["_"] * width)[: max(width, 3)])

@@ -1,0 +1,603 @@
+"""The log loader (calib_jax.io.files): any real log, no flags (issue 13).
+
+Each test covers a class of file, not one case: a layout that is guessed, a wrong answer that
+must not come back, an error that must say what to change, an encoding that must be read.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import os
+import string
+
+import numpy as np
+import pytest
+import scipy.io
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from calib_jax.io import files as F
+from calib_jax.io import load_log, parse_columns
+
+ROWS = np.array(
+    [
+        [0.01 * i, 10 + i, 20 + i, 30 + i, 40 + i, 50 + i, 60 + i, 70 + i, 80 + i, 90 + i]
+        for i in range(8)
+    ],
+    dtype=float,
+)
+
+
+def _write(tmp_path, text, name="log.csv", encoding="utf-8"):
+    p = tmp_path / name
+    if isinstance(text, bytes):
+        p.write_bytes(text)
+    else:
+        p.write_bytes(text.encode(encoding))
+    return p
+
+
+def _table(rows, delim=","):
+    return "\n".join(delim.join(f"{v:g}" for v in r) for r in rows) + "\n"
+
+
+# ---------------------------------------------------------------- headerless layouts by width
+
+NINE = ["ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz"]
+
+
+@pytest.mark.parametrize(
+    "width, sensor, names",
+    [
+        (3, None, ["ax", "ay", "az"]),
+        (3, "accel", ["ax", "ay", "az"]),
+        (3, "mag", ["mx", "my", "mz"]),
+        (3, "gyro", ["gx", "gy", "gz"]),
+        (4, None, ["t", "ax", "ay", "az"]),
+        (4, "mag", ["t", "mx", "my", "mz"]),
+        (6, None, NINE[:6]),
+        (6, "mag", ["ax", "ay", "az", "mx", "my", "mz"]),
+        (7, None, ["t", *NINE[:6]]),
+        (9, None, NINE),
+        (9, "mag", NINE),
+        (10, None, ["t", *NINE]),
+    ],
+)
+def test_headerless_width_decides_and_the_note_names_the_guess(tmp_path, width, sensor, names):
+    rows = ROWS[:, :width] if names[0] == "t" else ROWS[:, 1 : width + 1]
+    p = _write(tmp_path, _table(rows, " "), "log.txt")
+    log = load_log(p, sensor=sensor)
+    assert list(log.columns) == names and list(log.columns.values()) == [
+        str(i) for i in range(width)
+    ]
+    for key, arr in (("a", log.acc), ("g", log.gyro), ("m", log.mag)):
+        cols = [names.index(key + a) for a in "xyz"] if key + "x" in names else None
+        if cols is None:
+            assert arr is None
+        else:
+            np.testing.assert_array_equal(arr, rows[:, cols])
+    note = next(n for n in log.notes if n.startswith(f"headerless {width}-column file read as"))
+    assert " ".join(names) in note and "--columns" in note
+
+
+def test_columns_override_the_guess(tmp_path):
+    p = _write(tmp_path, _table(ROWS[:, 1:10], ","))
+    log = load_log(p, columns="mx,my,mz,_,_,_,ax,ay,az", sensor="gyro")
+    np.testing.assert_array_equal(log.mag, ROWS[:, 1:4])
+    np.testing.assert_array_equal(log.acc, ROWS[:, 7:10])
+    assert log.gyro is None and not any("headerless" in n for n in log.notes)
+
+
+@pytest.mark.parametrize("width", [5, 8, 11, 12])
+def test_other_widths_say_the_width_and_give_a_columns_example(tmp_path, width):
+    p = _write(tmp_path, _table(np.ones((6, width)), "\t"))
+    with pytest.raises(ValueError, match=rf"no header and {width} columns.*--columns t,ax,ay,az"):
+        load_log(p)
+
+
+@pytest.mark.parametrize("width", [1, 2])
+def test_too_few_columns_is_an_error(tmp_path, width):
+    p = _write(tmp_path, _table(np.ones((6, width)), ","))
+    with pytest.raises(ValueError, match="column"):
+        load_log(p)
+
+
+def test_bad_sensor_or_rate_argument(tmp_path):
+    p = _write(tmp_path, _table(ROWS[:, 1:4]))
+    with pytest.raises(ValueError, match="sensor="):
+        load_log(p, sensor="magnetometer")
+    with pytest.raises(ValueError, match="sample rate"):
+        load_log(p, sample_rate=-5)
+
+
+# ---------------------------------------------------------------- wrong answers that must stop
+
+
+def test_header_kept_when_the_first_data_row_is_one_field_short(tmp_path):
+    # the old loader took the first row whose width the next repeats as the data start, lost
+    # the header, and read t,ay,ax,az as the headerless t ax ay az
+    text = "t,ay,ax,az\n0.5,2,3\n" + _table(ROWS[:, :4])
+    log = load_log(_write(tmp_path, text))
+    np.testing.assert_array_equal(log.acc, ROWS[:, [2, 1, 3]])  # ax from the ax column
+    assert log.columns == {"t": "t", "ay": "ay", "ax": "ax", "az": "az"}
+    assert any("1 rows had the wrong number of fields" in n for n in log.notes)
+    assert not any("headerless" in n for n in log.notes)
+
+
+@pytest.mark.parametrize("bad", ["1,2", "1,2,3,4,5", "1,2,3,4,5,6,7"])
+def test_ragged_rows_anywhere_are_skipped_and_counted_header_kept(tmp_path, bad):
+    body = _table(ROWS[:, :4]).splitlines()
+    lines = ["t,ay,ax,az", bad, *body[:3], bad, *body[3:], bad]
+    log = load_log(_write(tmp_path, "\n".join(lines)))
+    np.testing.assert_array_equal(log.acc, ROWS[:, [2, 1, 3]])
+    assert np.array_equal(log.t, ROWS[:, 0])
+    assert any(n.startswith("3 rows had the wrong number of fields") for n in log.notes)
+
+
+def test_header_order_is_honoured(tmp_path):
+    log = load_log(_write(tmp_path, "az;t;ax;ay\n" + _table(ROWS[:, :4], ";")))
+    np.testing.assert_array_equal(log.acc, ROWS[:, [2, 3, 0]])
+    np.testing.assert_array_equal(log.t, ROWS[:, 1])
+
+
+def test_units_line_under_the_header(tmp_path):
+    text = "Time,AccX,AccY,AccZ\ns,g,g,g\n" + _table(ROWS[:, :4])
+    log = load_log(_write(tmp_path, text))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    assert any("under the header" in n for n in log.notes)
+
+
+def test_header_with_another_width_is_not_guessed_past(tmp_path):
+    # 3 names over 4 fields: which is which? An error, unless --columns says by position
+    p = _write(tmp_path, "ax,ay,az\n" + _table(ROWS[:, :4]))
+    with pytest.raises(ValueError, match="looks like a header with 3 names.*4 fields"):
+        load_log(p)
+    log = load_log(p, columns="t,ax,ay,az")
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    assert any("ignored" in n for n in log.notes)
+
+
+def test_preamble_title_and_comments(tmp_path):
+    text = "# logger v2\nFs,50.00\nInitialization time,60\n\nmx,my,mz\n% comment\n" + _table(
+        ROWS[:, 1:4]
+    )
+    log = load_log(_write(tmp_path, text))
+    assert log.sample_rate == 50.0 and log.mag.shape == (8, 3)
+    for title in ("Sensor log 2024", "Xsens raw log"):  # a title is not a header
+        log = load_log(_write(tmp_path, title + "\n" + _table(ROWS[:, :4], " "), "t.txt"))
+        assert any("before the data ignored" in n for n in log.notes)
+        np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+
+
+def test_trailing_separator_and_quoted_cells(tmp_path):
+    text = '"t","ax","ay","az",\n' + "".join(
+        ",".join(f'"{v:g}"' for v in r) + ",\n" for r in ROWS[:, :4]
+    )
+    log = load_log(_write(tmp_path, text))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+
+
+# ---------------------------------------------------------------- non-finite and absurd cells
+
+
+def test_nonfinite_and_huge_cells_load_and_are_counted_per_column(tmp_path):
+    lines = _table(ROWS[:, :4]).splitlines()
+    lines[1] = "0.01,inf,21,1e308"
+    lines[2] = "0.02,nan,abc,"
+    lines[3] = "0.03,12,-inf,33"
+    log = load_log(_write(tmp_path, "t,ax,ay,az\n" + "\n".join(lines)))
+    assert log.acc.shape == (8, 3)  # nothing dropped: that is the caller's job
+    # 1e308 is no reading: read as inf, so the calibration drops it with the other non-finite
+    # cells (kept as 1e308 it overflowed calibrate_mag's sums into a LinAlgError)
+    assert np.isposinf(log.acc[1, 2]) and np.isinf(log.acc[1, 0]) and np.isnan(log.acc[2, 1])
+    bad = next(n for n in log.notes if n.startswith("cells that are not finite"))
+    assert "ax 2" in bad and "ay 2" in bad and "az 1" in bad and " t " not in bad
+    huge = next(n for n in log.notes if n.startswith("cells beyond"))
+    assert "az 1" in huge and "ax" not in huge
+
+
+def test_label_column_does_not_count_but_fast_and_slow_paths_agree(tmp_path):
+    clean = _write(tmp_path, "t,ax,ay,az\n" + _table(ROWS[:, :4]), "a.csv")
+    dirty = _write(
+        tmp_path,
+        "part,t,ax,ay,az\n" + "".join(f"x_a,{r}" for r in _table(ROWS[:, :4]).splitlines(True)),
+        "b.csv",
+    )
+    a, b = load_log(clean), load_log(dirty)
+    np.testing.assert_array_equal(a.acc, b.acc)
+    assert b.notes == []  # the label column is not one the calibration uses
+
+
+def test_clean_files_take_numpys_parser(tmp_path, monkeypatch):
+    # the speed class: plain numeric text never goes through the line-by-line path
+    def refuse(*a, **k):
+        raise AssertionError("line-by-line path used for a clean file")
+
+    monkeypatch.setattr(F, "_parse_rows", refuse)
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(5000, 7))
+    for name, delim, head in [("a.csv", ",", "t,ax,ay,az,gx,gy,gz\n"), ("b.txt", " ", "")]:
+        p = tmp_path / name
+        np.savetxt(p, x, delimiter=delim, header=head.strip(), comments="")
+        log = load_log(p)
+        np.testing.assert_allclose(log.gyro, x[:, 4:7], rtol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        "clean",
+        "utf16",
+        "latin1_late",
+        "ragged_late",
+        "long_preamble",
+        "comment_tail",
+        "labels",
+        "empty_tail",
+    ],
+)
+def test_big_files_read_from_their_ends_agree_with_the_whole(tmp_path, case):
+    # files over 64 kB are sniffed from their first and last bytes and parsed by numpy from
+    # disk; whatever that path cannot take must fall back to the whole text and agree
+    n = 6000
+    x = np.column_stack([np.arange(n) / 100, np.arange(n) % 97, np.arange(n) % 89, -np.ones(n)])
+    lines = [",".join(f"{v:g}" for v in r) for r in x]
+    head = ["t,ax,ay,az"]
+    enc = "utf-8"
+    if case == "utf16":
+        enc = "utf-16"
+    elif case == "latin1_late":
+        lines[5000] = lines[5000] + ",\xb5"  # a 5th field with a non-UTF-8 byte, far down
+        enc = "latin-1"
+    elif case == "ragged_late":
+        lines[5000] = "1,2"
+    elif case == "long_preamble":
+        head = [f"# note {i} " + "x" * 60 for i in range(1200)] + ["Fs,100"] + head
+    if case == "labels":  # a label column (imucal's 'part'), and one text cell in a sensor
+        lines = [f"pose_{i // 500}," + ln for i, ln in enumerate(lines)]
+        head = ["part,t,ax,ay,az"]
+        lines[3000] = lines[3000].replace(",-1", ",oops")
+    if case == "empty_tail":  # a column that ends empty is still parsed where it has numbers
+        lines = [ln + ("," if i > n - 300 else ",7") for i, ln in enumerate(lines)]
+        head = ["t,ax,ay,az,temp"]
+    if case == "comment_tail":
+        lines += ["# end of log " + "-" * 40] * 1500
+    p = _write(tmp_path, "\n".join(head + lines) + "\n", encoding=enc)
+    assert p.stat().st_size > 70_000
+    log = load_log(p)
+    keep = np.ones(n, bool)
+    if case in ("latin1_late", "ragged_late"):
+        keep[5000] = False
+        assert any(s_.startswith("1 rows had the wrong number") for s_ in log.notes)
+    if case == "labels":
+        assert np.isnan(log.acc[3000, 2]) and "az 1" in log.notes[-1]
+        log.acc[3000, 2] = -1
+    if case == "empty_tail":
+        assert np.all(log.temp[: n - 300] == 7) and np.isnan(log.temp[-1])
+    np.testing.assert_array_equal(log.acc, x[keep, 1:4])
+    np.testing.assert_array_equal(log.t, x[keep, 0])
+    if case == "latin1_late":
+        assert any("Latin-1" in s_ for s_ in log.notes)
+    if case == "long_preamble":
+        assert log.sample_rate == 100
+
+
+# ---------------------------------------------------------------- clear errors
+
+
+def test_directory_or_pipe(tmp_path):
+    with pytest.raises(ValueError, match="is a directory"):
+        load_log(tmp_path)
+    fifo = tmp_path / "pipe.csv"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match="not a regular file"):
+        load_log(fifo)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ValueError, match="does not exist"):
+        load_log(tmp_path / "nope.csv")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root reads files whatever their mode")
+def test_unreadable_file_by_mode(tmp_path):
+    p = _write(tmp_path, "ax,ay,az\n1,2,3\n")
+    p.chmod(0)
+    try:
+        with pytest.raises(ValueError, match="permission denied"):
+            load_log(p)
+    finally:
+        p.chmod(0o644)
+
+
+def test_unreadable_file(tmp_path, monkeypatch):
+    # the same class where the suite runs as root: the OS refusing the read
+    p = _write(tmp_path, "ax,ay,az\n1,2,3\n")
+
+    def deny(name, *a, **k):
+        raise PermissionError(13, "Permission denied", str(name))
+
+    monkeypatch.setattr(type(p), "read_bytes", deny)
+    monkeypatch.setattr(F, "open", deny, raising=False)  # the loader's own open()
+    with pytest.raises(ValueError, match="permission denied.*chmod"):
+        load_log(p)
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"", "empty"),
+        (b"\n\n   \n", "empty"),
+        (b"# only\n# comments\n", "no data rows"),
+        (b"t,ax,ay,az\n", "no rows of numbers"),
+        (b"hello world\nthis is prose\n", "no rows of numbers"),
+    ],
+)
+def test_empty_and_dataless_files(tmp_path, content, match):
+    with pytest.raises(ValueError, match=match):
+        load_log(_write(tmp_path, content))
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (bytes(range(256)) * 20, "not a text log"),
+        (np.random.default_rng(1).bytes(5000), "not a text log"),
+        (b"\x89HDF\r\n\x1a\n" + bytes(500), "HDF5"),
+        (b"PK\x03\x04" + bytes(500), "zip"),
+    ],
+)
+def test_binary_files(tmp_path, content, match):
+    with pytest.raises(ValueError, match=match):
+        load_log(_write(tmp_path, content, "log.dat"))
+
+
+def test_truncated_or_corrupt_mat(tmp_path):
+    good = tmp_path / "good.mat"
+    scipy.io.savemat(good, {"data": ROWS[:, :4]})
+    raw = good.read_bytes()
+    for name, content in [
+        ("trunc.mat", raw[: len(raw) // 2]),
+        ("zeros.mat", raw[:128] + bytes(len(raw) - 128)),
+        ("header.mat", b"MATLAB 5.0 MAT-file" + bytes(200)),
+    ]:
+        with pytest.raises(ValueError, match="MATLAB"):
+            load_log(_write(tmp_path, content, name))
+
+
+def test_columns_beyond_the_file_or_not_in_the_header(tmp_path):
+    p = _write(tmp_path, _table(ROWS[:, 1:4], " "), "three.txt")
+    with pytest.raises(ValueError, match="column 4, but .* has only 3 columns"):
+        load_log(p, columns="t,ax,ay,az")
+    h = _write(tmp_path, "A,B,C\n" + _table(ROWS[:, 1:4]))
+    with pytest.raises(ValueError, match="'Q'.*not in the header"):
+        load_log(h, columns="ax=A,ay=B,az=Q")
+    with pytest.raises(ValueError, match="by position"):
+        load_log(p, columns="ax=A,ay=B,az=C")
+    with pytest.raises(ValueError, match="twice"):
+        parse_columns("ax,ax,az")
+    with pytest.raises(ValueError, match="unknown column"):
+        parse_columns("t,ax,ay,bz")
+    log = load_log(h, columns="ax=a,ay=b,az=c")  # header names match case-insensitively
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+
+
+def test_header_without_sensor_names_suggests_a_mapping(tmp_path):
+    p = _write(tmp_path, "foo,bar,baz\n" + _table(ROWS[:, 1:4]))
+    with pytest.raises(ValueError, match="--columns ax=foo,ay=bar,az=baz"):
+        load_log(p)
+
+
+# ---------------------------------------------------------------- encodings and compression
+
+TEXT = "Time (s),Acc X (g),Acc Y (g),Acc Z (g)\n" + _table(ROWS[:, :4])
+
+
+@pytest.mark.parametrize(
+    "encoding, note",
+    [
+        ("utf-8", None),
+        ("utf-8-sig", "byte-order mark"),
+        ("utf-16", "UTF-16"),
+        ("utf-16-le", "UTF-16 without a byte-order mark"),
+        ("utf-32", "UTF-32"),
+    ],
+)
+def test_encodings(tmp_path, encoding, note):
+    log = load_log(_write(tmp_path, TEXT, encoding=encoding))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    assert log.columns["ax"] == "Acc X (g)"  # no BOM glued to the first name
+    assert (note is None and log.notes == []) or any(note in n for n in log.notes)
+
+
+def test_latin1_header(tmp_path):
+    text = "t,ax,ay,az,Temp (\xb0C)\n" + _table(ROWS[:, :5])
+    log = load_log(_write(tmp_path, text, encoding="latin-1"))
+    assert log.columns["temp"] == "Temp (\xb0C)" and any("Latin-1" in n for n in log.notes)
+    np.testing.assert_array_equal(log.temp, ROWS[:, 4])
+
+
+@pytest.mark.parametrize("name", ["log.csv.gz", "log.csv", "log.gz"])
+def test_gzip_found_by_its_bytes(tmp_path, name):
+    log = load_log(_write(tmp_path, gzip.compress(TEXT.encode()), name))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    assert any("gzip" in n for n in log.notes)
+    log = load_log(_write(tmp_path, bz2.compress(TEXT.encode()), "b.bz2"))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+
+
+def test_truncated_gzip(tmp_path):
+    raw = gzip.compress((TEXT * 50).encode())
+    with pytest.raises(ValueError, match="gzip-compressed but does not decompress"):
+        load_log(_write(tmp_path, raw[: len(raw) // 2], "log.csv.gz"))
+
+
+def test_plain_text_named_gz_is_text(tmp_path):
+    log = load_log(_write(tmp_path, TEXT, "log.csv.gz"))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+
+
+@pytest.mark.parametrize("delim", [";", "\t", " "])
+def test_decimal_commas(tmp_path, delim):
+    body = _table(ROWS[:, :4] + 0.25, delim).replace(".", ",")
+    log = load_log(_write(tmp_path, delim.join(["t", "ax", "ay", "az"]) + "\n" + body))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4] + 0.25)
+    np.testing.assert_array_equal(log.t, ROWS[:, 0] + 0.25)
+    assert any("decimal commas" in n for n in log.notes)
+
+
+def test_comma_separated_with_spaces_is_not_decimal_commas(tmp_path):
+    log = load_log(_write(tmp_path, _table(ROWS[:, 1:4] + 0.5, ", ")))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4] + 0.5)
+    assert not any("decimal" in n for n in log.notes)
+
+
+# ---------------------------------------------------------------- MATLAB files
+
+
+def test_mat_variables_of_other_lengths_are_left_out_and_named(tmp_path):
+    p = tmp_path / "v.mat"
+    n = 8
+    scipy.io.savemat(
+        p,
+        {
+            "t": ROWS[:, 0],
+            "temp": np.arange(3.0),  # a different length: must not shift the others
+            "ax": ROWS[:, 1],
+            "ay": ROWS[:, 2],
+            "az": ROWS[:, 3],
+        },
+    )
+    log = load_log(p)
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    np.testing.assert_array_equal(log.t, ROWS[:n, 0])
+    assert log.temp is None
+    assert any("left out" in n and "temp (3)" in n for n in log.notes)
+
+
+def test_mat_sensor_matrices_and_single_matrix(tmp_path):
+    p = tmp_path / "m.mat"
+    scipy.io.savemat(p, {"acc": ROWS[:, 1:4], "gyro": ROWS[:, 4:7].T, "time": ROWS[:, 0]})
+    log = load_log(p)
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    np.testing.assert_array_equal(log.gyro, ROWS[:, 4:7])
+    np.testing.assert_array_equal(log.t, ROWS[:, 0])
+    q = tmp_path / "one.mat"
+    scipy.io.savemat(q, {"data": ROWS[:, 1:4]})
+    log = load_log(q, sensor="mag")
+    np.testing.assert_array_equal(log.mag, ROWS[:, 1:4])
+    r = tmp_path / "two.mat"
+    scipy.io.savemat(r, {"a1": ROWS[:, 1:4], "b2": ROWS[:, 4:8]})
+    with pytest.raises(ValueError, match="cannot tell which MATLAB variable"):
+        load_log(r)
+
+
+# ---------------------------------------------------------------- anything at all
+
+
+JUNK = ["", "abc", "nan", "inf", "-inf", "1e308", "1,5", '"3"', "NaN", "--", "1.2.3", "\u00b5"]
+DELIMS = [",", ";", "\t", " ", "|", ", "]
+
+
+@st.composite
+def log_files(draw):
+    width = draw(st.integers(1, 12))
+    delim = draw(st.sampled_from(DELIMS))
+    n = draw(st.integers(0, 20))
+    number = st.one_of(
+        st.integers(-40000, 40000).map(str),
+        st.floats(allow_nan=True, allow_infinity=True).map(repr),
+        st.floats(-10, 10, allow_nan=False).map(lambda v: f"{v:.6g}"),
+    )
+    cell = st.one_of(number, number, number, number, st.sampled_from(JUNK))
+    header_kind = draw(st.sampled_from(["none", "canon", "alias", "junk", "short", "long"]))
+    canon = list(F._CANON)
+    names: list[str] | None = None
+    if header_kind in ("canon", "alias", "short", "long"):
+        pool = canon + ["part", "acc_x", "Gyroscope X (deg/s)", "Mag Z", "n_samples"]
+        k = {"short": max(1, width - 1), "long": width + 1}.get(header_kind, width)
+        names = draw(st.lists(st.sampled_from(pool), min_size=k, max_size=k))
+    elif header_kind == "junk":
+        names = draw(
+            st.lists(
+                st.text(string.ascii_letters + " _()", min_size=1, max_size=6),
+                min_size=width,
+                max_size=width,
+            )
+        )
+    lines = []
+    if draw(st.booleans()):
+        lines += draw(
+            st.lists(
+                st.sampled_from(["Fs,50.00", "# comment", "", "title line", "rate,0"]), max_size=3
+            )
+        )
+    if names is not None:
+        lines.append(delim.join(names))
+    for _ in range(n):
+        w = width + draw(st.sampled_from([0, 0, 0, 0, 0, -1, 1]))
+        lines.append(delim.join(draw(st.lists(cell, min_size=max(w, 0), max_size=max(w, 0)))))
+    text = "\n".join(lines) + draw(st.sampled_from(["", "\n", "\r\n"]))
+    if delim in (";", "\t") and draw(st.booleans()):
+        text = text.replace(".", ",")
+    raw = text.encode(
+        draw(st.sampled_from(["utf-8", "utf-8-sig", "utf-16", "latin-1"])), errors="replace"
+    )
+    if draw(st.integers(0, 9)) == 0:
+        raw = gzip.compress(raw)
+    spec = draw(
+        st.one_of(
+            st.none(),
+            st.lists(st.sampled_from(canon + ["_"]), min_size=1, max_size=12).map(",".join),
+            st.lists(
+                st.tuples(st.sampled_from(canon), st.sampled_from((names or []) + ["x", "0", "3"])),
+                min_size=1,
+                max_size=4,
+            ).map(lambda kv: ",".join(f"{k}={v}" for k, v in kv)),
+            st.text(max_size=12),
+        )
+    )
+    sensor = draw(st.sampled_from([None, "accel", "mag", "gyro"]))
+    return raw, spec, sensor, len(lines)  # no more samples than lines
+
+
+@settings(
+    max_examples=120,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(case=log_files())
+def test_any_file_loads_consistently_or_raises_valueerror(tmp_path, case):
+    raw, spec, sensor, n_lines = case
+    p = tmp_path / "fuzz.csv"
+    p.write_bytes(raw)
+    try:
+        log = load_log(p, columns=spec, sensor=sensor)
+    except ValueError:
+        return
+    arrays = [a for a in (log.acc, log.gyro, log.mag) if a is not None]
+    assert arrays, "a log without any sensor must be a ValueError"
+    n = len(arrays[0])
+    assert 0 < n <= n_lines and len(log) == n
+    for a in arrays:
+        assert a.shape == (n, 3) and a.dtype == np.float64
+    for a in (log.t, log.temp):
+        assert a is None or a.shape == (n,)
+    assert all(isinstance(s, str) for s in log.notes)
+    assert set(log.columns) <= set(F._CANON)
+    assert log.sample_rate is None or (np.isfinite(log.sample_rate) and log.sample_rate > 0)
+    used = np.column_stack(arrays)
+    if not np.isfinite(used).all():
+        assert any(s.startswith("cells that are not finite") for s in log.notes)
+
+
+@settings(max_examples=60, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(raw=st.binary(max_size=400), suffix=st.sampled_from([".csv", ".mat", ".gz", ".txt"]))
+def test_any_bytes_load_or_raise_valueerror(tmp_path, raw, suffix):
+    p = tmp_path / f"b{suffix}"
+    p.write_bytes(raw)
+    try:
+        log = load_log(p)
+    except ValueError:
+        return
+    assert len(log) > 0
