@@ -36,7 +36,7 @@ def prepare(
     """
     if sensor not in SENSORS:
         raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
-    log = load_log(path, columns=columns)
+    log = load_log(path, columns=columns, sensor=sensor)
     x = log.acc if sensor == "accel" else log.mag
     if x is None:
         raise ValueError(f"{path}: no {sensor} columns; map them with --columns")

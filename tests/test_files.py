@@ -136,9 +136,11 @@ def test_ragged_rows_anywhere_are_skipped_and_counted_header_kept(tmp_path, bad)
 
 
 def test_header_order_is_honoured(tmp_path):
-    log = load_log(_write(tmp_path, "az;t;ax;ay\n" + _table(ROWS[:, :4], ";")))
-    np.testing.assert_array_equal(log.acc, ROWS[:, [2, 3, 0]])
-    np.testing.assert_array_equal(log.t, ROWS[:, 1])
+    # t second in the header (its column holds 100 Hz times: whole-second steps would be read
+    # as milliseconds, see test_time_in_ms_us_ns_is_converted_to_seconds)
+    log = load_log(_write(tmp_path, "az;t;ax;ay\n" + _table(ROWS[:, [1, 0, 2, 3]], ";")))
+    np.testing.assert_array_equal(log.acc, ROWS[:, [2, 3, 1]])
+    np.testing.assert_array_equal(log.t, ROWS[:, 0])
 
 
 def test_units_line_under_the_header(tmp_path):
@@ -601,3 +603,36 @@ def test_any_bytes_load_or_raise_valueerror(tmp_path, raw, suffix):
     except ValueError:
         return
     assert len(log) > 0
+
+
+@pytest.mark.parametrize(
+    ("scale", "unit"), [(1.0, None), (1e3, "ms"), (1e6, "us"), (1e9, "ns")]
+)
+@pytest.mark.parametrize("rate", [20.0, 100.0, 1000.0])
+def test_time_in_ms_us_ns_is_converted_to_seconds(tmp_path, scale, unit, rate):
+    """Loggers write millis(), micros() or nanoseconds since the epoch; read as seconds a 1 kHz
+    log in ns had a rate of 1e-6 Hz (the AirBrakes MicroStrain logs). The rate must come out
+    as recorded and t in seconds, with a note naming the unit."""
+    n = 50
+    t0 = 1.7e9 if unit == "ns" else 0.0  # epoch seconds: 1.7e18 ns still resolves 1 ms steps
+    t = (t0 + np.arange(n) / rate) * scale
+    path = tmp_path / "log.csv"
+    fmt = ".6f" if unit is None else ".0f"  # integer ticks, as loggers write them
+    path.write_text("t,ax,ay,az\n" + "".join(f"{v:{fmt}},0,0,1\n" for v in t))
+    log = load_log(path)
+    assert log.sample_rate == pytest.approx(rate, rel=1e-3)
+    assert np.median(np.diff(log.t)) == pytest.approx(1 / rate, rel=1e-3)
+    noted = [s for s in log.notes if "time column read as" in s]
+    assert (noted[0].split()[4] == unit) if unit else not noted, log.notes
+
+
+def test_vendor_prefixed_names_are_recognised(tmp_path):
+    """MicroStrain/MSCL exports name the calibrated accelerometer scaledAccelX."""
+    path = tmp_path / "mscl.csv"
+    path.write_text(
+        "timestamp,scaledAccelX,scaledAccelY,scaledAccelZ,scaledGyroX,scaledGyroY,scaledGyroZ\n"
+        "0,0.1,0.2,0.9,0,0,0\n0.01,0.1,0.2,0.9,0,0,0\n"
+    )
+    log = load_log(path)
+    assert log.columns["ax"] == "scaledAccelX" and log.columns["gz"] == "scaledGyroZ"
+    np.testing.assert_allclose(log.acc[0], [0.1, 0.2, 0.9])

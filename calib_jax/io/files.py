@@ -65,6 +65,9 @@ for _k, _names in _SENSOR_NAMES.items():
             _ALIASES[f"{_n}{_ax}"] = f"{_k}{_ax}"
             if len(_n) > 1:
                 _ALIASES[f"{_ax}{_n}"] = f"{_k}{_ax}"
+                # MicroStrain/MSCL (scaledAccelX) and other vendors' raw/calibrated prefixes
+                for _pre in ("scaled", "raw", "cal", "imu"):
+                    _ALIASES[f"{_pre}{_n}{_ax}"] = f"{_k}{_ax}"
 # an N x 3 MATLAB variable named for a sensor ('acc', 'gyro', 'mag') holds its x, y, z
 _MATRIX_NAMES = {n: k for k, names in _SENSOR_NAMES.items() for n in names if len(n) > 1}
 
@@ -963,6 +966,10 @@ def _assemble(
         if rate is not None and not (np.isfinite(rate) and rate > 0):
             notes.append(f"preamble sample rate {rate:g} ignored (not a positive number)")
             rate = None
+    if t is not None:
+        t, unit_note = _time_in_seconds(t)
+        if unit_note:
+            notes.append(unit_note)
     if rate is None and t is not None:
         with np.errstate(over="ignore", invalid="ignore"):
             dt = np.diff(t[np.isfinite(t)])
@@ -981,6 +988,38 @@ def _assemble(
         columns={k: names[v] for k, v in source.items()},
         notes=notes,
     )
+
+
+_TIME_UNITS = ((1.0, "s"), (1e-3, "ms"), (1e-6, "us"), (1e-9, "ns"))
+_PLAUSIBLE_RATE = (2.0, 20_000.0)  # Hz: what an IMU log is recorded at
+
+
+def _time_in_seconds(t: np.ndarray) -> tuple[np.ndarray, str | None]:
+    """The time column in seconds, and a note when it was in ms, us or ns.
+
+    Loggers write milliseconds (Arduino ``millis()``), microseconds or nanoseconds since boot
+    or the epoch as often as seconds. Read as seconds, a 1 kHz log in nanoseconds has a rate of
+    1e-6 Hz and every duration-based setting (the static detector's window, the shortest pose)
+    is wrong by 1e9. The unit is the first of s, ms, us, ns that puts the median sample
+    interval at a plausible IMU rate (2 Hz to 20 kHz); a column no unit makes plausible is
+    left as it is.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        dt = np.diff(t[np.isfinite(t)])
+        dt = dt[np.isfinite(dt) & (dt > 0)]
+    if dt.size == 0:
+        return t, None
+    step = float(np.median(dt))
+    lo, hi = _PLAUSIBLE_RATE
+    for scale, unit in _TIME_UNITS:
+        if lo <= 1.0 / (step * scale) <= hi:
+            if scale == 1.0:
+                return t, None
+            return t * scale, (
+                f"time column read as {unit} (median step {step:g}: {1.0 / (step * scale):.4g} "
+                f"Hz); converted to seconds"
+            )
+    return t, None
 
 
 def _example(width: int) -> str:
