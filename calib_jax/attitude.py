@@ -60,11 +60,11 @@ def gn_residual(q: jax.Array, a: jax.Array, m: jax.Array, r_a, r_m) -> jax.Array
 
 
 def gauss_newton_quaternion(
-    a: Float[Array, 3],
-    m: Float[Array, 3],
-    r_a: Float[Array, 3],
-    r_m: Float[Array, 3],
-    q0: Float[Array, 4] | None = None,
+    a: Float[Array, "3"],
+    m: Float[Array, "3"],
+    r_a: Float[Array, "3"],
+    r_m: Float[Array, "3"],
+    q0: Float[Array, "4"] | None = None,
     iterations: int = 6,
 ) -> tuple[jax.Array, jax.Array]:
     """One sample: (q, F) after ``iterations`` Gauss-Newton steps. Inputs need not be unit

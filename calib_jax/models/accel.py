@@ -39,20 +39,20 @@ PARAM_NAMES = (
 class AccelParams(eqx.Module):
     """The nine calibration parameters of one accelerometer (paper 1, eq. 1)."""
 
-    gains: Float[Array, 3]
+    gains: Float[Array, "3"]
     """alpha_x, alpha_y, alpha_z: input units per reference unit."""
-    nonorth: Float[Array, 3]
+    nonorth: Float[Array, "3"]
     """S_xy, S_xz, S_yz: off-diagonal terms of alpha, same unit as the gains."""
-    bias: Float[Array, 3]
+    bias: Float[Array, "3"]
     """beta_x, beta_y, beta_z: input units (the reading at zero acceleration)."""
 
     @classmethod
-    def from_vector(cls, p: Float[Array, 9]) -> AccelParams:
+    def from_vector(cls, p: Float[Array, "9"]) -> AccelParams:
         """Build from paper 1's parameter vector p."""
         p = jnp.asarray(p)
         return cls(gains=p[0:3], nonorth=p[3:6], bias=p[6:9])
 
-    def to_vector(self) -> Float[Array, 9]:
+    def to_vector(self) -> Float[Array, "9"]:
         """Paper 1's parameter vector p."""
         return jnp.concatenate([self.gains, self.nonorth, self.bias], axis=-1)
 
@@ -71,7 +71,7 @@ class AccelParams(eqx.Module):
         return cls(gains=jnp.ones(3, dtype), nonorth=jnp.zeros(3, dtype), bias=jnp.zeros(3, dtype))
 
 
-def alpha_matrix(p: Float[Array, 9]) -> Float[Array, "3 3"]:
+def alpha_matrix(p: Float[Array, "9"]) -> Float[Array, "3 3"]:
     """alpha from the parameter vector (symmetric, paper 1 eq. 1)."""
     ax, ay, az, sxy, sxz, syz = p[0], p[1], p[2], p[3], p[4], p[5]
     return jnp.stack(
@@ -83,7 +83,7 @@ def alpha_matrix(p: Float[Array, 9]) -> Float[Array, "3 3"]:
     )
 
 
-def correct(p: Float[Array, 9], raw: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+def correct(p: Float[Array, "9"], raw: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
     """Calibrated acceleration a = alpha^-1 (a' - beta), in reference units.
 
     Works on one sample (3,) or many (..., 3). alpha^-1 is the closed-form 3x3 inverse
@@ -92,13 +92,13 @@ def correct(p: Float[Array, 9], raw: Float[Array, "... 3"]) -> Float[Array, "...
     return (raw - p[6:9]) @ inv3(alpha_matrix(p)).T
 
 
-def distort(p: Float[Array, 9], a: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+def distort(p: Float[Array, "9"], a: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
     """The forward model a' = alpha a + beta (no noise): what the sensor reads."""
     return a @ alpha_matrix(p).T + p[6:9]
 
 
 def sphere_residual(
-    p: Float[Array, 9], raw: Float[Array, "N 3"], g: float | Float[Array, ""]
+    p: Float[Array, "9"], raw: Float[Array, "N 3"], g: float | Float[Array, ""]
 ) -> Float[Array, " N"]:
     """Paper 1 eq. 6: e(t) = |g|^2 - (a'(t) - beta)' (alpha^-1)^2 (a'(t) - beta).
 
@@ -111,7 +111,7 @@ def sphere_residual(
 
 
 def normalized_sphere_residual(
-    p: Float[Array, 9], raw: Float[Array, "N 3"], g: float | Float[Array, ""]
+    p: Float[Array, "9"], raw: Float[Array, "N 3"], g: float | Float[Array, ""]
 ) -> Float[Array, " N"]:
     """eq. 6 divided by g^2: dimensionless, so solver tolerances do not depend on the unit.
 
@@ -121,7 +121,7 @@ def normalized_sphere_residual(
     return 1.0 - jnp.sum(a * a, axis=-1)
 
 
-def norm_error(p: Float[Array, 9], raw: Float[Array, "N 3"], g) -> Float[Array, " N"]:
+def norm_error(p: Float[Array, "9"], raw: Float[Array, "N 3"], g) -> Float[Array, " N"]:
     """(|a| - g) / g for each corrected sample: the error the JSON's rms fields summarise."""
     a = correct(p, raw)
     return jnp.linalg.norm(a, axis=-1) / g - 1.0

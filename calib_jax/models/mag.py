@@ -47,7 +47,7 @@ PARAM_NAMES = {
 class EllipsoidParams(eqx.Module):
     """An ellipsoid (x - c)' M (x - c) = 1 in raw units."""
 
-    center: Float[Array, 3]
+    center: Float[Array, "3"]
     """c: the hard-iron offset / bias, raw units."""
     shape: Float[Array, "3 3"]
     """M: symmetric positive definite, 1 / raw units^2."""
