@@ -1,0 +1,184 @@
+"""Issue 13: wrong answers reported as ok and foreign exceptions. One test per class of bad
+input, each against a known truth: a fit on data that no ellipsoid explains is not "ok",
+nonsense reference magnitudes and masks are refused with the value named, a corrupt
+calibration file is refused with the file and the key named, a kill or a full disk during a
+recording loses nothing that was read."""
+
+import errno
+import json
+import re
+
+import numpy as np
+import pytest
+
+from calib_jax.calibration import AccelCalibration, MagCalibration, write_json_atomic
+from calib_jax.io.files import SensorLog
+
+# ---------------------------------------------------------------------------------------------
+# calibration records
+
+
+def _accel_cal(**kw) -> AccelCalibration:
+    p = np.array([1.01, 0.99, 1.02, 0.001, -0.002, 0.003, 0.01, -0.02, 0.03])
+    base = dict(
+        params=p,
+        stderr=np.full(9, 1e-4),
+        covariance=np.eye(9) * 1e-8,
+        correlation=np.eye(9),
+        condition=12.0,
+        status="ok",
+        input_units="g",
+        output_units="g",
+        g=1.0,
+        solver="lm1",
+        solver_status=0,
+        solver_message="converged",
+        iterations=5,
+        nfev=6,
+        use="means",
+        n_intervals=12,
+        n_points=12,
+        rms_before=1e-2,
+        rms_after=1e-4,
+        noise_floor=1e-4,
+        static_means=np.ones((2, 3)),
+        sensor_id="u1",
+        date="2026-01-01T00:00:00+00:00",
+    )
+    base.update(kw)
+    return AccelCalibration(**base)
+
+
+def _mag_cal(**kw) -> MagCalibration:
+    base = dict(
+        center=np.array([10.0, -5.0, 3.0]),
+        soft_iron=np.diag([1.1, 0.9, 1.0]),
+        radius=44.3,
+        model="full",
+        status="ok",
+        rms_before_pct=10.0,
+        rms_after_pct=0.5,
+        semi_axes=np.array([40.0, 45.0, 50.0]),
+        dcm=np.eye(3),
+        stderr_center=np.full(3, 0.1),
+        stderr_soft_iron=np.full((3, 3), np.nan),
+        condition=3.0,
+        solver="lm1",
+        solver_status=0,
+        solver_message="converged",
+        iterations=7,
+        n_samples=500,
+        coverage=0.9,
+        field=44.3,
+        units="uT",
+        model_selection={"full": {"bic": 1.0, "rms_pct": float("nan")}},
+        date="2026-01-01T00:00:00+00:00",
+    )
+    base.update(kw)
+    return MagCalibration(**base)
+
+
+# (edit of the saved text, key the error must name, what it must say)
+_ACCEL_FAULTS = [
+    (lambda d: d["params"].__setitem__("gains", ["NaN", 1.0, 1.0]), "params.gains", "finite"),
+    (lambda d: d["params"]["gains"].__setitem__(1, 0.0), r"params.gains\[1\]", "zero gain|is 0"),
+    (lambda d: d["units"].__setitem__("g", -1.0), "units.g", "positive"),
+    (lambda d: d.pop("solver_status"), "solver_status", "missing"),
+    (lambda d: d["params"].__setitem__("bias", [0.0, "x", 0.0]), "params.bias", "numbers"),
+]
+_MAG_FAULTS = [
+    (lambda d: d.__setitem__("center", [1.0, "inf", 0.0]), "center", "finite"),
+    (lambda d: d.__setitem__("soft_iron", [[0.0] * 3] * 3), "soft_iron", "singular"),
+    (lambda d: d.__setitem__("radius", 0.0), "radius", "positive"),
+    (lambda d: d.pop("center"), "center", "missing"),
+    (lambda d: d.__setitem__("soft_iron", [1.0, 2.0, 3.0]), "soft_iron", "3x3"),
+]
+
+
+@pytest.mark.parametrize(
+    "cls,make,faults",
+    [(AccelCalibration, _accel_cal, _ACCEL_FAULTS), (MagCalibration, _mag_cal, _MAG_FAULTS)],
+    ids=["accel", "mag"],
+)
+def test_calibration_file_validated_on_load(tmp_path, cls, make, faults):
+    """A corrupt file never loads as ok: NaN/Infinity (as strings or as the bare tokens
+    Python's json accepts), zero gains, singular matrices, non-positive magnitudes, missing
+    keys, wrong types and a top level that is not an object are each a ValueError naming the
+    file and the key; a good file round-trips to an equal record."""
+    cal = make()
+    good = tmp_path / "good.json"
+    cal.save(good)
+    assert cls.load(good) == cal  # field-wise equality (NaN == NaN in arrays and dicts)
+    assert cls.load(good) != make(sensor_id="other")
+    for i, (edit, key, what) in enumerate(faults):
+        d = json.loads(good.read_text())
+        edit(d)
+        bad = tmp_path / f"bad{i}.json"
+        bad.write_text(json.dumps(d))
+        with pytest.raises(ValueError, match=f"bad{i}.json.*{key}.*({what})") as e:
+            cls.load(bad)
+        assert re.search(what, str(e.value)), str(e.value)
+    # the bare tokens NaN / Infinity (not valid JSON, but accepted by Python's json)
+    first = "gains" if cls is AccelCalibration else "radius"
+    text = good.read_text()
+    for token in ("NaN", "Infinity", "-Infinity"):
+        k = text.index(f'"{first}"')
+        j = text.index(":", k) + 1
+        stop = min(text.index(",", j), text.index("\n", j + 2))
+        if first == "gains":  # the first gain: the line after '"gains": ['
+            j = text.index("[", k) + 1
+            stop = text.index(",", j)
+        bad = tmp_path / "token.json"
+        bad.write_text(text[:j] + f" {token}" + text[stop:])
+        with pytest.raises(ValueError, match=f"token.json.*{first}.*{token}"):
+            cls.load(bad)
+    for top in ("[1, 2, 3]", "42", '"calibration"'):
+        bad = tmp_path / "top.json"
+        bad.write_text(top)
+        with pytest.raises(ValueError, match="top.json.*JSON object"):
+            cls.load(bad)
+
+
+def test_apply_checks_shape_and_takes_a_log():
+    """apply takes one reading (3,), many (N, 3) or a loaded log (its acc resp. mag columns);
+    any other shape (an (N, 1) column would broadcast to (N, 3)) is a ValueError."""
+    acc, mag = _accel_cal(), _mag_cal()
+    rng = np.random.default_rng(0)
+    a, m = rng.normal(size=(5, 3)), 40 * rng.normal(size=(5, 3))
+    log = SensorLog(acc=a, mag=m, path="x.csv")
+    np.testing.assert_array_equal(acc.apply(log), acc.apply(a))
+    np.testing.assert_array_equal(mag.apply(log), mag.apply(m))
+    np.testing.assert_allclose(mag.apply(m[0]), mag.apply(m)[0])
+    np.testing.assert_allclose(acc.apply(a[0]), acc.apply(a)[0])
+    # truth: W (m - c)
+    np.testing.assert_allclose(mag.apply(m), (m - mag.center) @ mag.soft_iron.T)
+    for cal in (acc, mag):
+        for shape in ((5, 1), (5,), (5, 4), (2, 5, 3), ()):
+            with pytest.raises(ValueError, match=r"\(3,\) or many \(N, 3\)"):
+                cal.apply(np.ones(shape))
+    with pytest.raises(ValueError, match="x.csv: the log has no mag columns"):
+        mag.apply(SensorLog(acc=a, path="x.csv"))
+
+
+def test_json_written_atomically_on_full_disk(tmp_path, monkeypatch):
+    """A full disk while saving leaves the previous file (or none), no 0-byte file and no
+    temporary file, and raises the OSError."""
+    import os
+
+    cal = _mag_cal()
+    path = tmp_path / "m.calib.json"
+    cal.save(path)
+    before = path.read_bytes()
+    real_fsync = os.fsync
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError, match="No space"):
+        _mag_cal(radius=50.0).save(path)
+    with pytest.raises(OSError, match="No space"):
+        write_json_atomic(tmp_path / "new.json", {"a": 1})
+    monkeypatch.setattr(os, "fsync", real_fsync)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.calib.json"]
