@@ -182,3 +182,89 @@ def test_json_written_atomically_on_full_disk(tmp_path, monkeypatch):
     monkeypatch.setattr(os, "fsync", real_fsync)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.calib.json"]
+
+
+# ---------------------------------------------------------------------------------------------
+# magnetometer fits on data that no ellipsoid explains
+
+B = 45.0  # uT
+CENTRE = np.array([10.0, -20.0, 5.0])
+A = np.diag([1.1, 0.95, 1.0])
+
+
+def _tumble(n=2000, passes=2, noise=0.2, seed=0):
+    """A slow tumble in time order: ``passes`` spirals from pole to pole (consecutive samples
+    are neighbours on the sphere, as in a real log), through soft and hard iron."""
+    rng = np.random.default_rng(seed)
+    u = np.linspace(0, passes, n, endpoint=False) % 1.0
+    z = 1 - 2 * u
+    phi = 2 * np.pi * 25 * u
+    r = np.sqrt(1 - z * z)
+    d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    return (B * d) @ A.T + CENTRE + noise * rng.normal(size=(n, 3))
+
+
+def _fit(x, **kw):
+    import warnings
+
+    from calib_jax.mag import calibrate_mag
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return calibrate_mag(x, field=B, **kw)
+
+
+def test_mag_fit_not_ok_off_an_ellipsoid_shell():
+    """A noise cloud and a hyperboloid are no ellipsoid: status failed (success False), the
+    warning says so and what to check. Known truth for the control: the clean tumble is ok
+    with its true centre and a residual at the noise (0.45 % of the field)."""
+    rng = np.random.default_rng(1)
+    clean = _fit(_tumble())
+    assert clean.status == "ok" and clean.rms_after_pct < 1.0, clean.report()
+    np.testing.assert_allclose(clean.center, CENTRE, atol=0.1)
+    u, th = rng.uniform(-2, 2, 2000), rng.uniform(0, 2 * np.pi, 2000)
+    hyperboloid = 30 * np.stack([np.cosh(u) * np.cos(th), np.cosh(u) * np.sin(th), np.sinh(u)], 1)
+    cloud = B * rng.normal(size=(2000, 3))
+    for x in (hyperboloid, cloud):
+        cal = _fit(x)
+        assert cal.status == "failed" and not cal.success, cal.report()
+        assert any("do not lie on an ellipsoid shell" in w for w in cal.warnings)
+
+
+def test_mag_fit_flags_a_field_change_during_the_log():
+    """The hard iron jumps by 10 uT (and by 30 uT) halfway through a tumble: no single
+    ellipsoid fits, the residual (5.7 %, 15 %) far exceeds the sample-to-sample noise
+    (0.4 %), so the fit is not ok and the warning names the likely cause."""
+    x = _tumble()
+    for jump, status in ((10.0, "poorly_determined"), (30.0, "failed")):
+        y = x.copy()
+        y[len(y) // 2 :, 0] += jump
+        cal = _fit(y)
+        assert cal.status == status, cal.report()
+        assert any("changed during the recording" in w or "jumped" in w for w in cal.warnings)
+
+
+def test_mag_fit_leaves_saturated_samples_out():
+    """Axis x clipped at +-30 uT (the field along it reaches 59 uT): the clipped samples are
+    left out with a warning naming the axis, and the fit of the rest recovers the true hard
+    iron and soft iron (without the check: 7.6 % residual, status ok)."""
+    x = _tumble(seed=2)
+    x[:, 0] = np.clip(x[:, 0], -30.0, 30.0)
+    cal = _fit(x)
+    sat = [w for w in cal.warnings if "saturated" in w]
+    assert len(sat) == 2 and all("axis x" in w for w in sat), cal.warnings
+    assert cal.rms_after_pct < 1.0
+    np.testing.assert_allclose(cal.center, CENTRE, atol=0.5)
+    np.testing.assert_allclose(cal.soft_iron, np.linalg.inv(A), atol=0.02)  # W (m - c) = B d
+
+
+@pytest.mark.parametrize("scale", [1e300, 1e200, 1e-200])
+def test_mag_fit_extreme_values_are_a_value_error(scale):
+    """Values whose squares over- or underflow float64 (and a corrupt row of 1e308) are a
+    ValueError saying so, not numpy's LinAlgError 'Eigenvalues did not converge'."""
+    x = _tumble(n=500)
+    with pytest.raises(ValueError, match="float64"):
+        _fit(x * scale)
+    x[7] = [1e308, 0.0, 0.0]
+    with pytest.raises(ValueError, match="sample 7 holds 1e\\+308"):
+        _fit(x)
