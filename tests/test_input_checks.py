@@ -7,6 +7,7 @@ recording loses nothing that was read."""
 import errno
 import json
 import re
+import time
 
 import numpy as np
 import pytest
@@ -268,3 +269,93 @@ def test_mag_fit_extreme_values_are_a_value_error(scale):
     x[7] = [1e308, 0.0, 0.0]
     with pytest.raises(ValueError, match="sample 7 holds 1e\\+308"):
         _fit(x)
+
+
+# ---------------------------------------------------------------------------------------------
+# the recorder: a kill or a full disk loses nothing that was read
+
+
+def test_recorder_hands_every_read_to_the_os_before_the_next(tmp_path):
+    """With the flush cadence off (as if the process were SIGKILLed before it came round),
+    every line read so far is in the file on disk (read through another descriptor: the
+    process's buffers are not visible there) before the next read from the port."""
+    import os
+    import tty
+
+    from calib_jax.io.serial import SerialReader
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    log = tmp_path / "k.csv"
+    r = SerialReader(
+        os.ttyname(slave),
+        log=log,
+        columns="ax,ay,az",
+        flush_interval=1e9,
+        flush_lines=10**9,
+        fsync_interval=1e9,
+        on_message=lambda s: None,
+    )
+    checks = []
+    real = r._read_chunk
+
+    def read_after_check():
+        if log.exists():
+            on_disk = log.read_bytes()
+            assert os.stat(log).st_size == len(on_disk)
+            checks.append((r.stats.lines_ok, max(on_disk.count(b"\n") - 1, 0)))
+        return real()
+
+    r._read_chunk = read_after_check
+    sent = 0
+    try:
+        with r:
+            for chunk in range(20):
+                lines = b"".join(b"%d,%d,3\n" % (sent + k, chunk) for k in range(7))
+                # the first line after a connection counts as cut off: start with a line end
+                os.write(master, (b"\n" if chunk == 0 else b"") + lines)
+                sent += 7
+                end = time.monotonic() + 10
+                while r.stats.lines_ok < sent:
+                    assert time.monotonic() < end, r.stats.summary()
+                    r.read_batch()
+            read_after_check()  # the state after the last read
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert checks and checks[-1] == (sent, sent)
+    assert all(read == logged for read, logged in checks), checks
+
+
+def test_recorder_calibration_json_on_a_full_disk(tmp_path, monkeypatch, capsys):
+    """The disk fills up when the calibration JSON is written: no 0-byte .calib.json and no
+    temporary file are left, the error is reported (stderr, save_errors) instead of raised,
+    the calibration is still returned, and the log is untouched."""
+    import os
+
+    from calib_jax.io.serial import LogWriter
+    from calib_jax.record import calibrate_recording
+    from calib_jax.simulate import random_directions
+
+    rng = np.random.default_rng(3)
+    m = (45.0 * random_directions(1500, rng)) @ A.T + CENTRE + 0.2 * rng.normal(size=(1500, 3))
+    log = tmp_path / "rec.csv"
+    w = LogWriter(log)
+    w.open(["mx", "my", "mz"])
+    for row in m:
+        w.append(",".join(f"{v:.6f}" for v in row))
+    w.close()
+    before = log.read_bytes()
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    res = calibrate_recording(log, "mag", field=45.0, echo=None)
+    monkeypatch.undo()
+    assert res["mag"].status == "ok"
+    np.testing.assert_allclose(res["mag"].center, CENTRE, atol=0.1)
+    assert len(res["save_errors"]) == 1 and "No space left" in res["save_errors"][0]
+    assert "could not write" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.csv"]
+    assert log.read_bytes() == before
