@@ -359,3 +359,54 @@ def test_recorder_calibration_json_on_a_full_disk(tmp_path, monkeypatch, capsys)
     assert "could not write" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.csv"]
     assert log.read_bytes() == before
+
+
+# ---------------------------------------------------------------------------------------------
+# batch fits: reference magnitudes and masks
+
+
+def test_batch_rejects_bad_magnitudes_and_masks():
+    """g / field = 0, -1, NaN, inf (scalar or one per sensor) and a mask that is not boolean
+    or 0/1 (a NaN in a float mask used to count as True) are each a ValueError naming the
+    value; a per-sensor g is honoured (known truth: each sensor's output has its own |g|)."""
+    from calib_jax.batch import calibrate_accel_batch, calibrate_mag_batch
+    from calib_jax.simulate import random_directions
+
+    rng = np.random.default_rng(4)
+    raw = np.stack([random_directions(300, rng) * s + 0.01 * s for s in (1.0, 9.81)])
+    for bad in (0.0, -1.0, float("nan"), float("inf"), [1.0, -9.81], [1.0, float("nan")]):
+        with pytest.raises(ValueError, match=r"g must be a positive, finite magnitude, got"):
+            calibrate_accel_batch(raw, g=bad)
+        with pytest.raises(ValueError, match=r"field must be a positive, finite magnitude, got"):
+            calibrate_mag_batch(raw, field=bad)
+    with pytest.raises(ValueError, match=r"one per sensor \(2,\)"):
+        calibrate_accel_batch(raw, g=[1.0, 2.0, 3.0])
+    mask = np.ones(raw.shape[:2])
+    mask[1, 17] = np.nan
+    with pytest.raises(ValueError, match=r"mask\[1, 17\] is nan \(NaN\)"):
+        calibrate_accel_batch(raw, mask)
+    mask[1, 17] = 0.5
+    with pytest.raises(ValueError, match=r"mask\[1, 17\] is 0.5"):
+        calibrate_accel_batch(raw, mask)
+    mask[1, 17] = 0.0  # 0/1 floats are a mask
+    r = calibrate_accel_batch(raw, mask, g=[1.0, 9.81])
+    assert np.all(r.success) and list(np.asarray(r.n_samples)) == [300, 299]
+    gains = np.asarray(r.params)[:, :3]  # raw = g_true * a: gain = raw per output unit = 1
+    np.testing.assert_allclose(gains, 1.0, atol=1e-6)
+
+
+def test_reference_magnitude_must_match_the_unit():
+    """check_reference_magnitude: g = 1 on m/s^2 data (static norm 9.8) or g = 9.81 on data
+    in g is a ValueError naming both; within a factor of 2, and counts, pass."""
+    from calib_jax.batch import check_reference_magnitude
+
+    with pytest.raises(ValueError, match=r"g = 1 does not match.*norm 9.79, i.e. m/s\^2"):
+        check_reference_magnitude(1.0, None, 9.79)
+    with pytest.raises(ValueError, match=r"g = 9.81 does not match.*\bg\b"):
+        check_reference_magnitude(9.81, "g", 1.0)
+    with pytest.raises(ValueError, match="positive, finite"):
+        check_reference_magnitude(-9.81, "m/s^2", 9.8)
+    check_reference_magnitude(9.80665, "auto", 9.79)
+    check_reference_magnitude(1.0, "g", 1.01)
+    check_reference_magnitude(1.0, None, 16384.0)  # counts: any output unit
+    check_reference_magnitude([1.0, 1.0], "g", 1.0)
