@@ -410,3 +410,37 @@ def test_reference_magnitude_must_match_the_unit():
     check_reference_magnitude(1.0, "g", 1.01)
     check_reference_magnitude(1.0, None, 16384.0)  # counts: any output unit
     check_reference_magnitude([1.0, 1.0], "g", 1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# pipeline fits: the reference magnitude
+
+
+def test_pipeline_fit_rejects_a_nonpositive_magnitude():
+    """fit_accel / fit_mag with magnitude -1, 0, NaN or inf: a ValueError when the value is
+    concrete (it used to converge to negative gains), status FAILED with NaN params under jit
+    (where nothing can raise); the same fit with magnitude 1 recovers the truth."""
+    import jax
+    import jax.numpy as jnp
+
+    import calib_jax.pipeline as pl
+    from calib_jax.lm import Status
+    from calib_jax.simulate import random_directions
+
+    rng = np.random.default_rng(5)
+    truth_c = np.array([0.3, -0.2, 0.1])
+    raw = jnp.asarray(2.0 * random_directions(200, rng) + truth_c)
+    for fit in (pl.fit_accel, pl.fit_mag):
+        for bad in (-1.0, 0.0, float("nan"), float("inf")):
+            with pytest.raises(ValueError, match="magnitude must be a positive, finite"):
+                fit(raw, bad)
+        jitted = jax.jit(fit)
+        f = jitted(raw, -1.0)
+        assert int(f.status) == Status.FAILED and not bool(f.converged)
+        assert all(np.all(np.isnan(np.asarray(a))) for a in jax.tree.leaves(f.params))
+        good = jitted(raw, 1.0)
+        assert bool(good.converged)
+        c = good.params.bias if fit is pl.fit_accel else good.params.hard_iron
+        np.testing.assert_allclose(np.asarray(c), truth_c, atol=1e-8)
+        with pytest.raises(ValueError, match="sensor 1: magnitude must be"):
+            pl.fit_batch(fit, jnp.stack([raw, raw]), jnp.asarray([1.0, -1.0]))
