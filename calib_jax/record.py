@@ -598,8 +598,14 @@ def calibrate_devices(
             ]
             if ref is None:
                 ref = 9.80665 if norms and 3.0 < float(np.median(norms)) <= 30.0 else 1.0
-            elif norms:  # a given g must match the data's unit (m/s^2 data with g = 1: error)
-                check_reference_magnitude(ref, None, float(np.median(norms)))
+            else:  # a given g must match each log's unit (m/s^2 data with g = 1: error)
+                for x, m, p in zip(xs, masks, paths, strict=True):
+                    if m.any():
+                        try:
+                            norm = float(np.median(np.linalg.norm(x[m], axis=1)))
+                            check_reference_magnitude(ref, None, norm)
+                        except ValueError as exc:
+                            raise ValueError(f"{p}: {exc}") from None
             r = calibrate_accel_batch(raw, mask, g=ref, solver=solver)
         else:
             r = calibrate_mag_batch(raw, mask, field=field, solver=solver)
