@@ -481,7 +481,8 @@ class MagCalibration:
     """Outcome of :func:`calib_jax.calibrate_mag`: y = W (raw - center), |y| = radius.
 
     ``status`` is "ok", "poorly_determined", "not_converged" or "failed" (as for
-    :class:`AccelCalibration`). Errors are RMS of (|m| - radius) / radius in percent, before
+    :class:`AccelCalibration`; see :func:`calib_jax.calibrate_mag` for the plausibility
+    checks behind them). Errors are RMS of (|m| - radius) / radius in percent, before
     (raw data centred on its mean, radius its mean norm) and after calibration.
     """
 

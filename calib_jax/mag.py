@@ -15,7 +15,10 @@ Host side (checks, normalisation, model choice) around a pure jitted core:
    with the lowest BIC of the radial error;
 6. radius: the known field magnitude if given (output in its units), else det(M)^(-1/6) in raw
    units (det W = 1, MATLAB magcal's convention);
-7. report the RMS radial error before (centred on the data mean) and after, in percent.
+7. report the RMS radial error before (centred on the data mean) and after, in percent;
+8. plausibility: a residual no magnetometer ellipsoid fit reaches is not "ok" (see
+   RMS_PLAUSIBLE_PCT, RMS_NO_SHELL_PCT, AXES_RATIO below; saturated samples are left out
+   before the fit).
 
 The same routine calibrates an accelerometer (paper 2 applies it to every sensor): give static
 samples and ``field=1`` (g). With ``model="full"`` it is paper 1's nine-parameter model with a
@@ -222,13 +225,21 @@ def calibrate_mag(
     Returns
     -------
     MagCalibration
-        ``apply(raw)`` gives W (raw - c); ``status`` says whether to trust it.
+        ``apply(raw)`` gives W (raw - c); ``status`` says whether to trust it: "ok";
+        "poorly_determined" (converged, but a parameter is poorly pinned down, the residual
+        is implausibly large for a magnetometer and not explained by the sample-to-sample
+        noise, or the semi-axes differ by more than 4x); "not_converged"; "failed" (nothing
+        usable, including data that lie on no ellipsoid shell: RMS radial error above 12 %).
+        ``warnings`` give the cause and what to do. Axes saturated at their extreme value
+        are left out of the fit, with a warning.
 
     Raises
     ------
     ValueError
         With what to change: wrong shape, fewer than 20 finite samples, all directions in one
-        plane (a turn about a single axis), an unknown model or solver, a bad field value.
+        plane (a turn about a single axis), an unknown model or solver, a bad field value,
+        values float64 cannot fit (beyond 1e100, or a spread below 1e-100 or 1e-9 of the
+        offset).
     """
     source = None
     warn: list[str] = []
