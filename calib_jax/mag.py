@@ -414,7 +414,20 @@ def calibrate_mag(
     raw_err = nr / nr.mean() - 1.0
     after = np.linalg.norm((xv - centre) @ W.T, axis=1) / radius - 1.0
     rms_after = float(100 * np.sqrt(np.mean(after**2)))
-    status = _plausibility(status, rms_after, before, after, semi_axes, sensor, warn)
+
+    def full_rms() -> float:
+        """RMS radial error (percent of the data radius) of the full ellipsoid: whether the
+        data lie on an ellipsoid shell at all, whatever model was asked for."""
+        if "full" not in fits:
+            res_f = _fit(xn, "full", solver, opts)
+            c_f, M_f = unpack(res_f.params, "full")
+            e_f = np.asarray(radial_error(c_f, M_f, jnp.asarray(xn)) * natural_radius(M_f))
+            fits["full"] = (res_f, np.asarray(c_f), np.asarray(M_f), float(np.mean(e_f**2)), 0)
+        return float(100 * np.sqrt(fits["full"][3]))
+
+    status = _plausibility(
+        status, chosen, rms_after, full_rms, before, after, semi_axes, sensor, warn
+    )
     cal = MagCalibration(
         center=centre,
         soft_iron=W,
@@ -454,7 +467,9 @@ def calibrate_mag(
 
 def _plausibility(
     status: str,
+    model: str,
     rms_after: float,
+    full_rms,
     before: np.ndarray,
     after: np.ndarray,
     semi_axes: np.ndarray,
@@ -467,20 +482,30 @@ def _plausibility(
         return status
     what = "magnetometer" if sensor == "mag" else "sensor"
     rms_before = float(100 * np.sqrt(np.mean(before**2)))
-    if not np.isfinite(rms_after) or rms_after > RMS_NO_SHELL_PCT:
-        warn.append(
-            f"the samples do not lie on an ellipsoid shell: RMS radial error {rms_after:.3g} % "
-            f"after the fit ({rms_before:.3g} % before), where a {what} tumble reaches 0.5-2 % "
-            f"(above {RMS_NO_SHELL_PCT:g} % no ellipsoid describes the data). Check the column "
-            "mapping and units, that the field did not change during the recording (a magnet "
-            "or iron moving with the sensor, a hard iron that jumped), and that the sensor "
-            "was not saturated; then record a new tumble. Do not use this calibration"
-        )
-        return "failed"
     # sample-to-sample scatter of the calibrated norm: the noise (in time order)
     d = np.diff(after)
     noise = float(100 * 1.4826 * np.median(np.abs(d)) / np.sqrt(2)) if len(d) else 0.0
-    if rms_after > RMS_PLAUSIBLE_PCT and rms_after > NOISE_RATIO * noise:
+    implausible = rms_after > RMS_PLAUSIBLE_PCT and rms_after > NOISE_RATIO * noise
+    if not (np.isfinite(rms_after) and rms_after <= RMS_NO_SHELL_PCT) or implausible:
+        best = rms_after if model == "full" else full_rms()
+        if not best <= RMS_NO_SHELL_PCT:
+            warn.append(
+                f"the samples do not lie on an ellipsoid shell: RMS radial error {best:.3g} % "
+                f"after the full ellipsoid fit ({rms_before:.3g} % before), where a {what} "
+                f"tumble reaches 0.5-2 % (above {RMS_NO_SHELL_PCT:g} % no ellipsoid describes "
+                "the data). Check the column mapping and units, that the field did not change "
+                "during the recording (a magnet or iron moving with the sensor, a hard iron "
+                "that jumped), and that the sensor was not saturated; then record a new "
+                "tumble. Do not use this calibration"
+            )
+            return "failed"
+        if model != "full" and (best <= RMS_PLAUSIBLE_PCT or best <= 0.5 * rms_after):
+            warn.append(
+                f"the {model} model leaves an RMS radial error of {rms_after:.3g} % where a "
+                f"full ellipsoid leaves {best:.3g} %: this {what}'s soft iron needs "
+                "model='full' (or 'auto', --model full)"
+            )
+            return "poorly_determined"
         warn.append(
             f"implausible residual: RMS radial error {rms_after:.3g} % after the fit, where a "
             f"clean {what} tumble reaches 0.5-2 %, and the sample-to-sample noise explains only "
@@ -490,6 +515,12 @@ def _plausibility(
             "segments separately"
         )
         status = "poorly_determined"
+    if not np.all(np.isfinite(semi_axes)):
+        warn.append(
+            "the fitted quadric is not an ellipsoid (an axis with a non-positive eigenvalue): "
+            "the data do not lie on an ellipsoid shell; do not use this calibration"
+        )
+        return "failed"
     ratio = float(np.max(semi_axes) / np.min(semi_axes))
     if not ratio <= AXES_RATIO:
         warn.append(
