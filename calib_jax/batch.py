@@ -44,6 +44,62 @@ from .models.mag import N_PARAMS, log_radius_scale, natural_radius, soft_iron_ma
 
 MIN_SAMPLES = 20
 FLAT = 1e-3  # smallest / largest eigenvalue of the direction scatter: below is one plane
+# |g| in the physical units an accelerometer log comes in (counts: any output unit)
+G_IN_UNITS = {"g": 1.0, "m/s^2": 9.80665}
+
+
+def _units_from_norm(norm: float) -> str | None:
+    """The unit a static norm suggests (calib_jax.accel's table: 0.3-3 g, 3-30 m/s^2, above
+    counts)."""
+    if 0.3 <= norm <= 3.0:
+        return "g"
+    if 3.0 < norm <= 30.0:
+        return "m/s^2"
+    if norm > 30.0:
+        return "counts"
+    return None
+
+
+def check_magnitude(value, name: str, n: int | None = None) -> np.ndarray:
+    """A reference magnitude (``g`` or ``field``) as a float array, scalar or one per sensor
+    ((n,) when ``n`` is given); a ValueError naming the value unless every entry is a
+    positive finite number. Works on host values only (not on tracers)."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if a.ndim > 1 or (a.ndim == 1 and n is not None and a.shape != (n,)):
+        want = "a scalar" + (f" or one per sensor ({n},)" if n is not None else "")
+        raise ValueError(f"{name} must be {want}, got shape {a.shape}")
+    bad = ~(np.isfinite(a) & (a > 0))
+    if np.any(bad):
+        where = "" if a.ndim == 0 else f" (sensor {int(np.flatnonzero(bad)[0])})"
+        v = a[np.flatnonzero(bad)[0]] if a.ndim else a
+        raise ValueError(
+            f"{name} must be a positive, finite magnitude, got {float(v)!r}{where}: it is the "
+            "field magnitude the calibrated output should have (1 for g, 9.80665 for m/s^2)"
+        )
+    return a
+
+
+def check_reference_magnitude(g, units: str | None, norm: float) -> None:
+    """Raise a ValueError when the reference magnitude ``g`` and the data's unit disagree by
+    more than a factor of 2 (data in m/s^2, static norm ~9.8, with g = 1, or data in g with
+    g = 9.81). ``units`` is the data's unit ("g", "m/s^2", "counts"; None or "auto": the one
+    the static norm ``norm`` suggests); counts take any g (the output unit is free). ``g``
+    may be one per sensor. Also rejects a non-positive or non-finite g."""
+    ga = check_magnitude(g, "g")
+    unit = units if units not in (None, "auto") else _units_from_norm(float(norm))
+    expected = G_IN_UNITS.get(unit or "")
+    if expected is None:
+        return
+    for v in np.atleast_1d(ga):
+        if not 0.5 <= v / expected <= 2.0:
+            raise ValueError(
+                f"g = {v:g} does not match the data's unit: the static readings have norm "
+                f"{float(norm):.4g}, i.e. {unit}, where |g| is {expected:g}; pass g = "
+                f"{expected:g} (--g {expected:g}), or convert the data to the unit of g"
+            )
 
 
 def quadric_theta(Q: jax.Array, c: jax.Array, scale: jax.Array) -> jax.Array:
@@ -231,8 +287,8 @@ def _compiled(kind: str, model: str, solver: str, options: tuple, shard: bool):
     def run(raw, valid, ref):
         S, mean, k = _batch_moments(raw, valid)
         params, stderr, status, rms, res, bad = jax.vmap(
-            lambda S, m, k: one(S, m, k, ref, model, solver, dict(options))
-        )(S, mean, k)
+            lambda S, m, k, r: one(S, m, k, r, model, solver, dict(options))
+        )(S, mean, k, ref)
         nan = jnp.nan
         return BatchResult(
             params=jnp.where(bad[:, None], nan, params),
@@ -249,9 +305,7 @@ def _compiled(kind: str, model: str, solver: str, options: tuple, shard: bool):
 
         mesh = Mesh(np.array(jax.devices()), ("sensors",))
         P = PartitionSpec("sensors")
-        run = jax.shard_map(
-            run, mesh=mesh, in_specs=(P, P, PartitionSpec()), out_specs=P, check_vma=False
-        )
+        run = jax.shard_map(run, mesh=mesh, in_specs=(P, P, P), out_specs=P, check_vma=False)
     return jax.jit(run)
 
 
@@ -263,7 +317,7 @@ def sensor_bucket(n: int, devices: int = 1) -> int:
     return max(step, -(-n // step) * step)
 
 
-def _prepare(raw, mask, shard):
+def _prepare(raw, mask, ref, shard):
     raw = jnp.asarray(raw)
     if raw.ndim != 3 or raw.shape[-1] != 3:
         raise ValueError(
@@ -274,18 +328,41 @@ def _prepare(raw, mask, shard):
         raw = raw.astype(float)
     if mask is None:
         mask = jnp.ones(raw.shape[:2], bool)
-    mask = jnp.asarray(mask, bool)
+    mask = _bool_mask(mask)
     if mask.shape != raw.shape[:2]:
         raise ValueError(f"mask must be (sensors, samples) = {raw.shape[:2]}, got {mask.shape}")
     valid = mask  # non-finite samples are masked inside the jitted moment pass
     n = raw.shape[0]
+    ref = jnp.broadcast_to(jnp.asarray(ref, raw.dtype), (n,))
     size = sensor_bucket(n, len(jax.devices()) if shard else 1)
     if size > n:  # padding sensors: all samples masked out (INSUFFICIENT_DATA, sliced off)
         raw = jnp.concatenate([raw, jnp.zeros((size - n, *raw.shape[1:]), raw.dtype)])
         valid = jnp.concatenate([valid, jnp.zeros((size - n, valid.shape[1]), bool)])
+        ref = jnp.concatenate([ref, jnp.ones(size - n, raw.dtype)])
     if shard:
-        raw, valid = shard_batch(raw), shard_batch(valid)
-    return raw, valid
+        raw, valid, ref = shard_batch(raw), shard_batch(valid), shard_batch(ref)
+    return raw, valid, ref
+
+
+def _bool_mask(mask) -> jax.Array:
+    """A boolean mask; a numeric one only if every entry is 0 or 1 (a float mask with NaN
+    would otherwise count as all-true)."""
+    if isinstance(mask, jax.core.Tracer):
+        return jnp.asarray(mask, bool)
+    m = np.asarray(mask)
+    if m.dtype == bool:
+        return jnp.asarray(m)
+    if m.dtype.kind not in "iuf":
+        raise ValueError(f"mask must be boolean (True = use the sample), got dtype {m.dtype}")
+    bad = ~((m == 0) | (m == 1))
+    if np.any(bad):
+        i = tuple(int(k) for k in np.argwhere(bad)[0])
+        raise ValueError(
+            f"mask must be boolean or 0/1, but mask{list(i)} is {m[i].item()!r}"
+            + (" (NaN)" if m.dtype.kind == "f" and np.isnan(m[i]) else "")
+            + ": pass a boolean array (True = use the sample)"
+        )
+    return jnp.asarray(m, bool)
 
 
 def shard_batch(x: jax.Array) -> jax.Array:
@@ -322,9 +399,10 @@ def calibrate_accel_batch(
         Readings in any unit; logs of different lengths are padded and masked.
     mask : (sensors, samples) bool, optional
         Samples to fit (e.g. the static ones from :func:`calib_jax.static.detect_static`).
-        Non-finite samples are always left out.
-    g : float
-        Reference magnitude in output units.
+        Non-finite samples are always left out. A numeric mask must hold only 0 and 1.
+    g : float or (sensors,) array
+        Reference magnitude in output units (positive and finite: a ValueError names a bad
+        value; :func:`check_reference_magnitude` checks it against the data's unit).
     model, solver, solver_options
         As :func:`calib_jax.calibrate_accel`.
     shard : bool
@@ -340,9 +418,10 @@ def calibrate_accel_batch(
     if solver not in ("lm1", "lm2", "lm3", "optimistix"):
         raise ValueError(f"solver must be lm1, lm2, lm3 or optimistix, got {solver!r}")
     n = np.shape(raw)[0]
-    raw, valid = _prepare(raw, mask, shard)
+    g = check_magnitude(g, "g", n)
+    raw, valid, ref = _prepare(raw, mask, g, shard)
     opts = tuple(sorted((solver_options or {}).items()))
-    out = _compiled("accel", model, solver, opts, shard)(raw, valid, jnp.asarray(g, raw.dtype))
+    out = _compiled("accel", model, solver, opts, shard)(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)
 
 
@@ -359,19 +438,17 @@ def calibrate_mag_batch(
     """The ellipsoid fit of :func:`calib_jax.calibrate_mag` for many sensors in one call.
 
     ``params`` (S, 12) is [center (3), W (9, row-major)]: y = W (raw - center) has magnitude
-    ``field`` (or det W = 1 without it). ``stderr`` holds the centre's standard errors (the
-    first three entries); the W entries are NaN (use calibrate_mag for them). The model is
-    fixed (no automatic choice in a batch).
+    ``field`` (a positive number, or one per sensor; or det W = 1 without it). ``stderr``
+    holds the centre's standard errors (the first three entries); the W entries are NaN (use
+    calibrate_mag for them). The model is fixed (no automatic choice in a batch).
     """
     if model not in N_PARAMS:
         raise ValueError(f"model must be one of {tuple(N_PARAMS)}, got {model!r}")
     if solver not in ("lm1", "lm2", "lm3", "optimistix"):
         raise ValueError(f"solver must be lm1, lm2, lm3 or optimistix, got {solver!r}")
-    if field is not None and not (np.isfinite(field) and field > 0):
-        raise ValueError(f"field must be a positive magnitude, got {field!r}")
     n = np.shape(raw)[0]
-    raw, valid = _prepare(raw, mask, shard)
+    field = np.nan if field is None else check_magnitude(field, "field", n)
+    raw, valid, ref = _prepare(raw, mask, field, shard)
     opts = tuple(sorted((solver_options or {}).items()))
-    ref = jnp.asarray(np.nan if field is None else field, raw.dtype)
     out = _compiled("mag", model, solver, opts, shard)(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)

@@ -7,8 +7,12 @@ file applies to new raw data from the same sensor: a = alpha^-1 (a' - beta).
 
 from __future__ import annotations
 
+import dataclasses as _dc
 import datetime as _dt
 import json
+import math
+import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,7 +25,7 @@ FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class AccelCalibration:
     """Outcome of :func:`calib_jax.calibrate_accel`.
 
@@ -90,12 +94,17 @@ class AccelCalibration:
         """The parameters as a JAX pytree, for use inside jitted pipelines."""
         return AccelParams.from_vector(jnp.asarray(self.params))
 
-    def apply(self, raw: np.ndarray) -> np.ndarray:
-        """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for (..., 3)."""
-        raw = np.asarray(raw, float)
-        if raw.shape[-1] != 3:
-            raise ValueError(f"raw must have 3 columns (x, y, z), got shape {raw.shape}")
-        return apply_params(self.params, raw)
+    def apply(self, raw) -> np.ndarray:
+        """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for one
+        reading (3,), many (N, 3), or a loaded log (:class:`calib_jax.io.SensorLog`: its
+        ``acc`` columns)."""
+        return apply_params(self.params, _raw_vectors(raw, "acc"))
+
+    def __eq__(self, other) -> bool:
+        """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
+        return _fields_equal(self, other)
+
+    __hash__ = None  # type: ignore[assignment]  # holds arrays
 
     # ---- report ----------------------------------------------------------------------------
     def table(self) -> str:
@@ -166,57 +175,74 @@ class AccelCalibration:
         return _sanitize(d)
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """Write the JSON atomically (:func:`write_json_atomic`): a full disk leaves the old
+        file (or none), never a truncated one."""
+        write_json_atomic(path, self.to_dict())
 
     @classmethod
-    def from_dict(cls, d: dict) -> AccelCalibration:
-        _check_version(d)
-        if d.get("model") not in MODELS:
-            raise ValueError(f"not an accelerometer calibration: model is {d.get('model')!r}")
-
-        def vec(block):
-            return np.array(
-                [float(v) for k in ("gains", "nonorth", "bias") for v in block[k]], float
+    def from_dict(cls, d: dict, source: str | Path | None = None) -> AccelCalibration:
+        """Rebuild from :meth:`to_dict`'s layout, validated: a ValueError names ``source``
+        (the file), the key and what is wrong (missing, not a number, non-finite, a zero
+        gain, a singular gain matrix, a non-positive g)."""
+        r = _Doc(d, source)
+        _check_version(r.d, r.where)
+        if r.d.get("model") not in MODELS:
+            raise ValueError(
+                f"{r.where}not an accelerometer calibration: model is {r.d.get('model')!r}"
             )
 
-        def mat(m):
-            return np.array([[float(v) for v in row] for row in m], float)
+        def vec(block, finite):
+            return np.concatenate(
+                [r.arr(f"{block}.{k}", (3,), finite=finite) for k in ("gains", "nonorth", "bias")]
+            )
 
+        params = vec("params", True)
+        for i in np.flatnonzero(params[0:3] == 0):
+            raise ValueError(
+                f"{r.where}key 'params.gains[{i}]' is 0: a zero gain cannot be inverted"
+            )
+        alpha = np.asarray(AccelParams.from_vector(jnp.asarray(params)).alpha)
+        if not np.linalg.cond(alpha) < 1e12:
+            raise ValueError(
+                f"{r.where}keys 'params.gains'/'params.nonorth' give a singular gain matrix "
+                f"(condition number {np.linalg.cond(alpha):.3g}); refit the calibration"
+            )
         return cls(
-            params=vec(d["params"]),
-            stderr=vec(d["stderr"]),
-            covariance=mat(d["covariance"]),
-            correlation=mat(d["correlation"]),
-            condition=float(d["condition"]),
-            status=d["status"],
-            input_units=d["units"]["input"],
-            output_units=d["units"]["output"],
-            g=float(d["units"]["g"]),
-            solver=d["solver"],
-            solver_status=int(d["solver_status"]),
-            solver_message=d["solver_message"],
-            iterations=int(d["iterations"]),
-            nfev=int(d["nfev"]),
-            use=d["use"],
-            n_intervals=int(d["n_intervals"]),
-            n_points=int(d["n_points"]),
-            rms_before=float(d["rms_before"]),
-            rms_after=float(d["rms_after"]),
-            noise_floor=float(d["noise_floor"]),
-            poorly_determined=list(d.get("poorly_determined", [])),
-            warnings=list(d.get("warnings", [])),
-            static_means=np.array(d.get("static_means", []), float).reshape(-1, 3),
-            nominal_offset=np.array(d.get("nominal", {}).get("offset", [0.0, 0.0, 0.0]), float),
-            nominal_scale=float(d.get("nominal", {}).get("scale", 1.0)),
-            sensor_id=d.get("sensor_id"),
-            date=d["date"],
-            source=d.get("source"),
-            model=d["model"],
+            params=params,
+            stderr=vec("stderr", False),
+            covariance=r.arr("covariance", (9, 9), finite=False),
+            correlation=r.arr("correlation", (9, 9), finite=False),
+            condition=r.num("condition", finite=False),
+            status=r.text("status"),
+            input_units=r.text("units.input"),
+            output_units=r.text("units.output"),
+            g=r.num("units.g", positive=True),
+            solver=r.text("solver"),
+            solver_status=r.integer("solver_status"),
+            solver_message=r.text("solver_message"),
+            iterations=r.integer("iterations"),
+            nfev=r.integer("nfev"),
+            use=r.text("use"),
+            n_intervals=r.integer("n_intervals"),
+            n_points=r.integer("n_points"),
+            rms_before=r.num("rms_before", finite=False),
+            rms_after=r.num("rms_after", finite=False),
+            noise_floor=r.num("noise_floor", finite=False),
+            poorly_determined=r.strings("poorly_determined"),
+            warnings=r.strings("warnings"),
+            static_means=r.arr("static_means", (-1, 3), default=[], finite=False),
+            nominal_offset=r.arr("nominal.offset", (3,), default=[0.0, 0.0, 0.0]),
+            nominal_scale=r.num("nominal.scale", default=1.0, positive=True),
+            sensor_id=r.text("sensor_id", optional=True),
+            date=r.text("date"),
+            source=r.text("source", optional=True),
+            model=r.d["model"],
         )
 
     @classmethod
     def load(cls, path: str | Path) -> AccelCalibration:
-        return cls.from_dict(_read_json(path))
+        """Read a saved calibration; a ValueError names the file, the key and the fault."""
+        return cls.from_dict(_read_json(path), source=path)
 
 
 def split_params(p: np.ndarray) -> dict:
@@ -232,20 +258,206 @@ def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:
     return (raw - params[6:9]) @ np.linalg.inv(alpha).T
 
 
+class _Token:
+    """A bare NaN / Infinity / -Infinity in a JSON file (Python's json accepts them; the JSON
+    standard does not, and :meth:`AccelCalibration.to_dict` writes them as strings)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+
+def _find_token(o, key: str = "") -> tuple[str, str] | None:
+    if isinstance(o, _Token):
+        return key, o.name
+    if isinstance(o, dict):
+        items = ((f"{key}.{k}" if key else str(k), v) for k, v in o.items())
+    elif isinstance(o, list):
+        items = ((f"{key}[{i}]", v) for i, v in enumerate(o))
+    else:
+        return None
+    for k, v in items:
+        hit = _find_token(v, k)
+        if hit is not None:
+            return hit
+    return None
+
+
 def _read_json(path: str | Path) -> dict:
     try:
-        return json.loads(Path(path).read_text())
+        d = json.loads(Path(path).read_text(), parse_constant=_Token)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path} is not a calibration JSON file: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path} is not a calibration JSON file (not UTF-8 text): {exc}") from exc
+    hit = _find_token(d)
+    if hit is not None:
+        raise ValueError(
+            f"{path}: key {hit[0]!r} holds the non-standard JSON token {hit[1]} (not a number "
+            "calib_jax writes); the file was edited or written by another program: refit or "
+            "correct the value"
+        )
+    return d
 
 
-def _check_version(d: dict) -> None:
+_MISSING = object()
+
+
+class _Doc:
+    """Typed, validated access to a calibration dict; errors name the file and the key."""
+
+    def __init__(self, d, source) -> None:
+        self.where = f"{source}: " if source is not None else ""
+        if not isinstance(d, dict):
+            raise ValueError(
+                f"{self.where}a calibration file holds a JSON object, got a {type(d).__name__}"
+            )
+        self.d = d
+
+    def get(self, key: str, default=_MISSING):
+        o = self.d
+        for part in key.split("."):
+            if not isinstance(o, dict) or part not in o:
+                if default is not _MISSING:
+                    return default
+                raise ValueError(f"{self.where}key {key!r} is missing")
+            o = o[part]
+        return o
+
+    def num(self, key, *, finite=True, positive=False, default=_MISSING) -> float:
+        v = self.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int | float | str):
+            raise ValueError(f"{self.where}key {key!r} must be a number, got {v!r}")
+        try:
+            x = float(v)
+        except ValueError:
+            raise ValueError(f"{self.where}key {key!r} must be a number, got {v!r}") from None
+        if (finite or positive) and not math.isfinite(x):
+            raise ValueError(f"{self.where}key {key!r} must be finite, got {v!r}")
+        if positive and not x > 0:
+            raise ValueError(f"{self.where}key {key!r} must be positive, got {v!r}")
+        return x
+
+    def integer(self, key) -> int:
+        x = self.num(key)
+        if x != int(x):
+            raise ValueError(f"{self.where}key {key!r} must be an integer, got {x!r}")
+        return int(x)
+
+    def text(self, key, optional=False) -> str | None:
+        v = self.get(key, None if optional else _MISSING)
+        if v is None and optional:
+            return None
+        if not isinstance(v, str):
+            raise ValueError(f"{self.where}key {key!r} must be a string, got {v!r}")
+        return v
+
+    def strings(self, key) -> list[str]:
+        v = self.get(key, [])
+        if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+            raise ValueError(f"{self.where}key {key!r} must be a list of strings, got {v!r}")
+        return list(v)
+
+    def arr(self, key, shape, *, finite=True, default=_MISSING) -> np.ndarray:
+        v = self.get(key, default)
+        try:
+            a = np.array(v, dtype=float)
+        except (ValueError, TypeError):
+            raise ValueError(f"{self.where}key {key!r} must hold numbers, got {v!r}") from None
+        if shape[0] == -1 and a.size == 0:
+            a = a.reshape(0, *shape[1:])
+        ok = a.ndim == len(shape) and all(s in (-1, n) for s, n in zip(shape, a.shape, strict=True))
+        if not ok:
+            want = "x".join("N" if s == -1 else str(s) for s in shape)
+            raise ValueError(f"{self.where}key {key!r} must be {want} numbers, got shape {a.shape}")
+        if finite and not np.all(np.isfinite(a)):
+            bad = np.argwhere(~np.isfinite(a))[0]
+            raise ValueError(
+                f"{self.where}key {key!r} holds {a[tuple(bad)]} at {list(map(int, bad))}: "
+                "the parameters must be finite"
+            )
+        return a
+
+
+def _raw_vectors(raw, attr: str) -> np.ndarray:
+    """(3,) or (N, 3) float array from an array or a loaded log's ``attr`` columns."""
+    from .io.files import SensorLog
+
+    if isinstance(raw, SensorLog):
+        x = getattr(raw, attr)
+        if x is None:
+            cols = {"acc": "ax, ay, az", "mag": "mx, my, mz"}[attr]
+            raise ValueError(f"{raw.path}: the log has no {attr} columns ({cols})")
+        raw = x
+    x = np.asarray(raw, float)
+    if x.ndim not in (1, 2) or x.shape[-1] != 3:
+        raise ValueError(
+            f"raw must be one reading (3,) or many (N, 3), columns x, y, z; got shape {x.shape}"
+        )
+    return x
+
+
+def _value_equal(x, y) -> bool:
+    if isinstance(x, np.ndarray | np.generic) or isinstance(y, np.ndarray | np.generic):
+        x, y = np.asarray(x), np.asarray(y)
+        nan_ok = x.dtype.kind in "fc" and y.dtype.kind in "fc"
+        return x.shape == y.shape and bool(np.array_equal(x, y, equal_nan=nan_ok))
+    if isinstance(x, dict) and isinstance(y, dict):
+        return x.keys() == y.keys() and all(_value_equal(x[k], y[k]) for k in x)
+    if isinstance(x, list | tuple) and isinstance(y, list | tuple):
+        return len(x) == len(y) and all(_value_equal(a, b) for a, b in zip(x, y, strict=True))
+    if isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y):
+        return True
+    return bool(x == y)
+
+
+def _fields_equal(a, b):
+    if type(a) is not type(b):
+        return NotImplemented
+    return all(_value_equal(getattr(a, f.name), getattr(b, f.name)) for f in _dc.fields(a))
+
+
+def write_json_atomic(path: str | Path, obj) -> None:
+    """Write ``obj`` as JSON to ``path`` atomically: a temporary file in the same folder,
+    fsynced, then ``os.replace``. On an error (a full disk: OSError ENOSPC) the temporary
+    file is removed and the error re-raised; ``path`` keeps its old content, or stays absent,
+    never a truncated file."""
+    path = Path(path)
+    text = json.dumps(obj, indent=2) + "\n"
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        if hasattr(os, "fchmod"):  # mkstemp makes 0600; keep the old file's mode, else 0644
+            os.fchmod(fd, path.stat().st_mode & 0o777 if path.exists() else 0o644)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def _check_version(d: dict, where: str = "") -> None:
     version = d.get("format_version")
     if version != FORMAT_VERSION:
         raise ValueError(
-            f"calibration format_version {version!r} is not supported (this calib_jax "
+            f"{where}calibration format_version {version!r} is not supported (this calib_jax "
             f"reads version {FORMAT_VERSION}); refit with this version or upgrade calib_jax"
         )
+
+
+def _unsanitize(o):
+    """Inverse of :func:`_sanitize` for free-form blocks: 'nan', 'inf', '-inf' back to float."""
+    if isinstance(o, dict):
+        return {k: _unsanitize(v) for k, v in o.items()}
+    if isinstance(o, list):
+        return [_unsanitize(v) for v in o]
+    if isinstance(o, str) and o in ("nan", "inf", "-inf"):
+        return float(o)
+    return o
 
 
 def _sanitize(o):
@@ -264,12 +476,13 @@ MAG_MODELS = ("sphere", "diag", "full")
 _field = field  # MagCalibration has an attribute named field
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MagCalibration:
     """Outcome of :func:`calib_jax.calibrate_mag`: y = W (raw - center), |y| = radius.
 
     ``status`` is "ok", "poorly_determined", "not_converged" or "failed" (as for
-    :class:`AccelCalibration`). Errors are RMS of (|m| - radius) / radius in percent, before
+    :class:`AccelCalibration`; see :func:`calib_jax.calibrate_mag` for the plausibility
+    checks behind them). Errors are RMS of (|m| - radius) / radius in percent, before
     (raw data centred on its mean, radius its mean norm) and after calibration.
     """
 
@@ -319,10 +532,19 @@ class MagCalibration:
     def success(self) -> bool:
         return self.status in ("ok", "poorly_determined")
 
-    def apply(self, raw: np.ndarray) -> np.ndarray:
-        """Calibrated vectors W (raw - center), in host-side numpy; inside JAX use
+    def apply(self, raw) -> np.ndarray:
+        """Calibrated vectors W (raw - center) for one reading (3,), many (N, 3), or a loaded
+        log (:class:`calib_jax.io.SensorLog`: its ``mag`` columns, ``acc`` for an
+        accelerometer fit), in host-side numpy; inside JAX use
         :func:`calib_jax.models.mag.compensate`."""
-        return (np.asarray(raw, float) - self.center) @ self.soft_iron.T
+        x = _raw_vectors(raw, "acc" if self.sensor == "accel" else "mag")
+        return (x - self.center) @ self.soft_iron.T
+
+    def __eq__(self, other) -> bool:
+        """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
+        return _fields_equal(self, other)
+
+    __hash__ = None  # type: ignore[assignment]  # holds arrays
 
     def report(self) -> str:
         unit = self.units or "raw units"
@@ -398,51 +620,62 @@ class MagCalibration:
         )
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """Write the JSON atomically (:func:`write_json_atomic`): a full disk leaves the old
+        file (or none), never a truncated one."""
+        write_json_atomic(path, self.to_dict())
 
     @classmethod
-    def from_dict(cls, d: dict) -> MagCalibration:
-        _check_version(d)
-        if d.get("kind") != "ellipsoid" or d.get("model") not in MAG_MODELS:
+    def from_dict(cls, d: dict, source: str | Path | None = None) -> MagCalibration:
+        """Rebuild from :meth:`to_dict`'s layout, validated as :meth:`AccelCalibration.from_dict`
+        (centre and W finite, W invertible, radius and field positive)."""
+        r = _Doc(d, source)
+        _check_version(r.d, r.where)
+        if r.d.get("kind") != "ellipsoid" or r.d.get("model") not in MAG_MODELS:
             raise ValueError(
-                f"not an ellipsoid calibration (kind {d.get('kind')!r}, model "
-                f"{d.get('model')!r}); load accelerometer files with AccelCalibration.load"
+                f"{r.where}not an ellipsoid calibration (kind {r.d.get('kind')!r}, model "
+                f"{r.d.get('model')!r}); load accelerometer files with AccelCalibration.load"
             )
-
-        def arr(v):
-            return np.array(v, dtype=float)
-
+        W = r.arr("soft_iron", (3, 3))
+        if not np.linalg.cond(W) < 1e12:
+            raise ValueError(
+                f"{r.where}key 'soft_iron' is a singular matrix (condition number "
+                f"{np.linalg.cond(W):.3g}): it would map every reading onto a plane; refit"
+            )
+        ms = r.get("model_selection", {})
+        if not isinstance(ms, dict):
+            raise ValueError(f"{r.where}key 'model_selection' must be an object, got {ms!r}")
         return cls(
-            center=arr(d["center"]),
-            soft_iron=arr(d["soft_iron"]),
-            radius=float(d["radius"]),
-            model=d["model"],
-            status=d["status"],
-            rms_before_pct=float(d["rms_before_pct"]),
-            rms_after_pct=float(d["rms_after_pct"]),
-            rms_raw_pct=float(d.get("rms_raw_pct", "nan")),
-            semi_axes=arr(d["semi_axes"]),
-            dcm=arr(d["dcm"]),
-            stderr_center=arr(d["stderr"]["center"]),
-            stderr_soft_iron=arr(d["stderr"]["soft_iron"]),
-            condition=float(d["condition"]),
-            solver=d["solver"],
-            solver_status=int(d["solver_status"]),
-            solver_message=d["solver_message"],
-            iterations=int(d["iterations"]),
-            n_samples=int(d["n_samples"]),
-            coverage=float(d["coverage"]),
-            field=None if d.get("field") is None else float(d["field"]),
-            units=d.get("units"),
-            sensor=d.get("sensor", "mag"),
-            model_selection=d.get("model_selection", {}),
-            poorly_determined=list(d.get("poorly_determined", [])),
-            warnings=list(d.get("warnings", [])),
-            sensor_id=d.get("sensor_id"),
-            date=d["date"],
-            source=d.get("source"),
+            center=r.arr("center", (3,)),
+            soft_iron=W,
+            radius=r.num("radius", positive=True),
+            model=r.d["model"],
+            status=r.text("status"),
+            rms_before_pct=r.num("rms_before_pct", finite=False),
+            rms_after_pct=r.num("rms_after_pct", finite=False),
+            rms_raw_pct=r.num("rms_raw_pct", finite=False, default="nan"),
+            semi_axes=r.arr("semi_axes", (3,), finite=False),
+            dcm=r.arr("dcm", (3, 3), finite=False),
+            stderr_center=r.arr("stderr.center", (3,), finite=False),
+            stderr_soft_iron=r.arr("stderr.soft_iron", (3, 3), finite=False),
+            condition=r.num("condition", finite=False),
+            solver=r.text("solver"),
+            solver_status=r.integer("solver_status"),
+            solver_message=r.text("solver_message"),
+            iterations=r.integer("iterations"),
+            n_samples=r.integer("n_samples"),
+            coverage=r.num("coverage", finite=False),
+            field=None if r.get("field", None) is None else r.num("field", positive=True),
+            units=r.text("units", optional=True),
+            sensor=r.text("sensor", optional=True) or "mag",
+            model_selection=_unsanitize(ms),
+            poorly_determined=r.strings("poorly_determined"),
+            warnings=r.strings("warnings"),
+            sensor_id=r.text("sensor_id", optional=True),
+            date=r.text("date"),
+            source=r.text("source", optional=True),
         )
 
     @classmethod
     def load(cls, path: str | Path) -> MagCalibration:
-        return cls.from_dict(_read_json(path))
+        """Read a saved calibration; a ValueError names the file, the key and the fault."""
+        return cls.from_dict(_read_json(path), source=path)

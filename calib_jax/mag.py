@@ -15,7 +15,10 @@ Host side (checks, normalisation, model choice) around a pure jitted core:
    with the lowest BIC of the radial error;
 6. radius: the known field magnitude if given (output in its units), else det(M)^(-1/6) in raw
    units (det W = 1, MATLAB magcal's convention);
-7. report the RMS radial error before (centred on the data mean) and after, in percent.
+7. report the RMS radial error before (centred on the data mean) and after, in percent;
+8. plausibility: a residual no magnetometer ellipsoid fit reaches is not "ok" (see
+   RMS_PLAUSIBLE_PCT, RMS_NO_SHELL_PCT, AXES_RATIO below; saturated samples are left out
+   before the fit).
 
 The same routine calibrates an accelerometer (paper 2 applies it to every sensor): give static
 samples and ``field=1`` (g). With ``model="full"`` it is paper 1's nine-parameter model with a
@@ -32,6 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+# TODO(issue 13): _saturated is shared with calibrate_accel; move it to a small shared module
+# (e.g. calib_jax/checks.py) once accel.py is free to edit, and import it from there in both
+from .accel import _saturated
 from .calibration import MagCalibration
 from .geometry import (
     ellipsoid_fit_constrained_moments,
@@ -65,6 +71,22 @@ FLAT = 0.01
 # a fitted mean radius this many times the data's RMS radius means the ellipsoid ran away
 # (partial coverage lets a huge ellipsoid pass through a cap of data)
 RUNAWAY = 10.0
+# plausibility of the RMS radial error after the fit (percent of the field), from real logs:
+# clean magnetometer tumbles reach 0.5-2 % (CK-Explorer 1.26 %, BROAD 1.5-1.9 %), the noisy
+# QMC5883L log 6.2 % (all of it sample-to-sample noise: 5.6 %), BROAD trial 34 with a magnet
+# attached for part of the log 7.6 % (sample-to-sample noise 0.4 %, ratio 19; clean logs 1-4).
+# Above RMS_PLAUSIBLE_PCT a residual that the sample-to-sample scatter does not explain
+# (more than NOISE_RATIO times it) means the data are not one ellipsoid: "poorly_determined".
+RMS_PLAUSIBLE_PCT = 5.0
+NOISE_RATIO = 6.0
+# above this no ellipsoid describes the data (a noise cloud 28-39 %, a hyperboloid 28-46 %,
+# a hard iron jumping by 2/3 of the field 15 %): "failed"
+RMS_NO_SHELL_PCT = 12.0
+# largest / smallest semi-axis: soft iron this strong is not a magnetometer (QMC5883L 2.2,
+# the strongest of the real logs; others 1.03-1.4)
+AXES_RATIO = 4.0
+# data whose squares overflow or underflow float64 (the ellipsoid matrix is 1 / radius^2)
+EXTREME = 1e100
 
 
 # ---------------------------------------------------------------------------------------------
@@ -149,6 +171,22 @@ def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:+.2f}" for x in v) + "]"
 
 
+def _spread(x: np.ndarray) -> tuple[np.ndarray, float]:
+    """Mean and RMS distance from it; a ValueError when float64 cannot resolve the spread."""
+    mean = x.mean(axis=0)
+    s = float(np.sqrt(np.mean(np.sum((x - mean) ** 2, axis=1))))
+    if np.all(x == x[0]):
+        raise ValueError("all samples are identical: the sensor did not move or is stuck")
+    if not s >= 1e-9 * float(np.max(np.abs(mean))) or not s > 1 / EXTREME:
+        centre = ", ".join(f"{v:.3g}" for v in mean)
+        raise ValueError(
+            f"the samples vary by only {s:.3g} around [{centre}]: too little for float64 to "
+            "resolve an ellipsoid (values below 1e-100, or an offset 1e9 times the spread); "
+            "the sensor did not move, or rescale the data or subtract the offset first"
+        )
+    return mean, s
+
+
 def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple) -> LMResult:
     xpad, wpad = pad_rows(xn)
     return _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
@@ -187,13 +225,21 @@ def calibrate_mag(
     Returns
     -------
     MagCalibration
-        ``apply(raw)`` gives W (raw - c); ``status`` says whether to trust it.
+        ``apply(raw)`` gives W (raw - c); ``status`` says whether to trust it: "ok";
+        "poorly_determined" (converged, but a parameter is poorly pinned down, the residual
+        is implausibly large for a magnetometer and not explained by the sample-to-sample
+        noise, or the semi-axes differ by more than 4x); "not_converged"; "failed" (nothing
+        usable, including data that lie on no ellipsoid shell: RMS radial error above 12 %).
+        ``warnings`` give the cause and what to do. Axes saturated at their extreme value
+        are left out of the fit, with a warning.
 
     Raises
     ------
     ValueError
         With what to change: wrong shape, fewer than 20 finite samples, all directions in one
-        plane (a turn about a single axis), an unknown model or solver, a bad field value.
+        plane (a turn about a single axis), an unknown model or solver, a bad field value,
+        values float64 cannot fit (beyond 1e100, or a spread below 1e-100 or 1e-9 of the
+        offset).
     """
     source = None
     warn: list[str] = []
@@ -233,10 +279,27 @@ def calibrate_mag(
             "through all orientations, a few hundred samples at least)"
         )
 
-    mean = xv.mean(axis=0)
-    s = float(np.sqrt(np.mean(np.sum((xv - mean) ** 2, axis=1))))
-    if not s > 0:
-        raise ValueError("all samples are identical: the sensor did not move or is stuck")
+    big = np.max(np.abs(xv), axis=1)
+    if big.max() > EXTREME:
+        k = int(np.argmax(big))
+        raise ValueError(
+            f"sample {k} holds {big[k]:.3g}: values beyond {EXTREME:.0e} cannot be fitted in "
+            "float64 (the ellipsoid matrix is 1 / radius^2); convert the data to a physical "
+            "unit, or drop the corrupt rows"
+        )
+    mean, s = _spread(xv)
+    for ax, kind, v in _saturated(xv):
+        hit = xv[:, ax] == v
+        xv = xv[~hit]
+        warn.append(
+            f"axis {'xyz'[ax]} is saturated at its {kind} ({v:g}, {int(hit.sum())} samples left "
+            "out): the field along it exceeds the sensor's range; use a wider range setting, "
+            "or move away from the magnet or iron that drives it to the limit"
+        )
+    if len(xv) < 20:
+        raise ValueError(f"only {len(xv)} unsaturated finite samples; record within range")
+    mean, s = _spread(xv)
+
     xn = (xv - mean) / s
     cs, _ = sphere_fit(jnp.asarray(xn), jnp.ones(len(xn)))
     d = xn - np.asarray(cs)
@@ -294,10 +357,14 @@ def calibrate_mag(
     M = M_n / s**2
     radius = float(field) if field is not None else float(natural_radius(jnp.asarray(M)))
     W = np.asarray(soft_iron_matrix(jnp.asarray(M), radius))
-    evals, R = np.linalg.eigh(M)
-    if np.linalg.det(R) < 0:
-        R[:, 0] = -R[:, 0]
-    semi_axes = 1.0 / np.sqrt(evals)
+    if np.all(np.isfinite(M)):
+        evals, R = np.linalg.eigh(M)
+        if np.linalg.det(R) < 0:
+            R[:, 0] = -R[:, 0]
+    else:  # a failed solve (status "failed" below); eigh would raise "did not converge"
+        evals, R = np.full(3, np.nan), np.full((3, 3), np.nan)
+    with np.errstate(invalid="ignore"):
+        semi_axes = 1.0 / np.sqrt(evals)  # NaN for a non-ellipsoid (an eigenvalue <= 0)
 
     # standard errors: centre in raw units, W relative (d(W/r)) times the radius
     Jc = np.asarray(_shape_jacobian(chosen)(res.params))
@@ -331,8 +398,11 @@ def calibrate_mag(
     # coverage on the calibrated sphere (directions from a sphere fit to distorted data
     # overstate it)
     y = (xv - centre) @ W.T
-    frac, _, unseen = sphere_coverage(y / np.linalg.norm(y, axis=1, keepdims=True))
-    if frac < 0.5:
+    if np.all(np.isfinite(y)):
+        frac, _, unseen = sphere_coverage(y / np.linalg.norm(y, axis=1, keepdims=True))
+    else:
+        frac, unseen = 0.0, np.full(3, np.nan)
+    if frac < 0.5 and status != "failed":
         warn.append(
             f"the data cover {100 * frac:.0f} % of the sphere of directions (least seen axis "
             f"{_vec(unseen)}): the shape is poorly determined there; tumble through more "
@@ -343,6 +413,21 @@ def calibrate_mag(
     nr = np.linalg.norm(xv, axis=1)
     raw_err = nr / nr.mean() - 1.0
     after = np.linalg.norm((xv - centre) @ W.T, axis=1) / radius - 1.0
+    rms_after = float(100 * np.sqrt(np.mean(after**2)))
+
+    def full_rms() -> float:
+        """RMS radial error (percent of the data radius) of the full ellipsoid: whether the
+        data lie on an ellipsoid shell at all, whatever model was asked for."""
+        if "full" not in fits:
+            res_f = _fit(xn, "full", solver, opts)
+            c_f, M_f = unpack(res_f.params, "full")
+            e_f = np.asarray(radial_error(c_f, M_f, jnp.asarray(xn)) * natural_radius(M_f))
+            fits["full"] = (res_f, np.asarray(c_f), np.asarray(M_f), float(np.mean(e_f**2)), 0)
+        return float(100 * np.sqrt(fits["full"][3]))
+
+    status = _plausibility(
+        status, chosen, rms_after, full_rms, before, after, semi_axes, sensor, warn
+    )
     cal = MagCalibration(
         center=centre,
         soft_iron=W,
@@ -350,7 +435,7 @@ def calibrate_mag(
         model=chosen,
         status=status,
         rms_before_pct=float(100 * np.sqrt(np.mean(before**2))),
-        rms_after_pct=float(100 * np.sqrt(np.mean(after**2))),
+        rms_after_pct=rms_after,
         rms_raw_pct=float(100 * np.sqrt(np.mean(raw_err**2))),
         semi_axes=semi_axes,
         dcm=R,
@@ -373,5 +458,76 @@ def calibrate_mag(
         source=source,
     )
     if status in ("failed", "not_converged"):
-        _warnings.warn(f"ellipsoid calibration {status}: {cal.solver_message}", stacklevel=2)
+        cause = cal.solver_message
+        if is_converged(solver_status) and warn:
+            cause = warn[-1]  # converged, but the data are not an ellipsoid
+        _warnings.warn(f"ellipsoid calibration {status}: {cause}", stacklevel=2)
     return cal
+
+
+def _plausibility(
+    status: str,
+    model: str,
+    rms_after: float,
+    full_rms,
+    before: np.ndarray,
+    after: np.ndarray,
+    semi_axes: np.ndarray,
+    sensor: str,
+    warn: list[str],
+) -> str:
+    """Downgrade a converged fit that no magnetometer ellipsoid explains (see the limits at the
+    top of the module); appends the cause and the remedy to ``warn``."""
+    if status not in ("ok", "poorly_determined"):
+        return status
+    what = "magnetometer" if sensor == "mag" else "sensor"
+    rms_before = float(100 * np.sqrt(np.mean(before**2)))
+    # sample-to-sample scatter of the calibrated norm: the noise (in time order)
+    d = np.diff(after)
+    noise = float(100 * 1.4826 * np.median(np.abs(d)) / np.sqrt(2)) if len(d) else 0.0
+    implausible = rms_after > RMS_PLAUSIBLE_PCT and rms_after > NOISE_RATIO * noise
+    if not (np.isfinite(rms_after) and rms_after <= RMS_NO_SHELL_PCT) or implausible:
+        best = rms_after if model == "full" else full_rms()
+        if not best <= RMS_NO_SHELL_PCT:
+            warn.append(
+                f"the samples do not lie on an ellipsoid shell: RMS radial error {best:.3g} % "
+                f"after the full ellipsoid fit ({rms_before:.3g} % before), where a {what} "
+                f"tumble reaches 0.5-2 % (above {RMS_NO_SHELL_PCT:g} % no ellipsoid describes "
+                "the data). Check the column mapping and units, that the field did not change "
+                "during the recording (a magnet or iron moving with the sensor, a hard iron "
+                "that jumped), and that the sensor was not saturated; then record a new "
+                "tumble. Do not use this calibration"
+            )
+            return "failed"
+        if model != "full" and (best <= RMS_PLAUSIBLE_PCT or best <= 0.5 * rms_after):
+            warn.append(
+                f"the {model} model leaves an RMS radial error of {rms_after:.3g} % where a "
+                f"full ellipsoid leaves {best:.3g} %: this {what}'s soft iron needs "
+                "model='full' (or 'auto', --model full)"
+            )
+            return "poorly_determined"
+        warn.append(
+            f"implausible residual: RMS radial error {rms_after:.3g} % after the fit, where a "
+            f"clean {what} tumble reaches 0.5-2 %, and the sample-to-sample noise explains only "
+            f"{noise:.2g} %: the field or the hard iron probably changed during the recording "
+            "(a magnet or iron object moved with the sensor, a motor or current switched, the "
+            "sensor was re-mounted). Record again away from them, or fit the undisturbed "
+            "segments separately"
+        )
+        status = "poorly_determined"
+    if not np.all(np.isfinite(semi_axes)):
+        warn.append(
+            "the fitted quadric is not an ellipsoid (an axis with a non-positive eigenvalue): "
+            "the data do not lie on an ellipsoid shell; do not use this calibration"
+        )
+        return "failed"
+    ratio = float(np.max(semi_axes) / np.min(semi_axes))
+    if not ratio <= AXES_RATIO:
+        warn.append(
+            f"the ellipsoid's semi-axes differ by a factor {ratio:.3g} (above {AXES_RATIO:g}; "
+            f"{_vec(semi_axes)}): soft iron this strong is implausible for a {what}; the data "
+            "probably do not lie on one ellipsoid (a changing field, wrong columns) or cover "
+            "too little of it"
+        )
+        status = "poorly_determined"
+    return status

@@ -54,7 +54,7 @@ from jaxtyping import Array, Float, Int
 from .accel import initial_guess
 from .attitude import gauss_newton_quaternion, reference_vectors
 from .implicit import solve_implicit
-from .lm.status import CONVERGED_STATUSES
+from .lm.status import CONVERGED_STATUSES, Status
 from .mag import ellipsoid_start
 from .models.accel import AccelParams, alpha_matrix, correct
 from .models.mag import sqrtm_spd, unpack
@@ -250,6 +250,29 @@ def _prepare(raw, magnitude, weights):
     return raw, g, w
 
 
+def _magnitude_ok(g: jax.Array):
+    """A concrete magnitude must be positive and finite (ValueError naming it); a traced one
+    (under jit, vmap or grad) cannot raise: returns the traced test, which :func:`_fail_if`
+    turns into status FAILED with NaN parameters. Concrete: returns True."""
+    if isinstance(g, jax.core.Tracer):
+        return jnp.isfinite(g) & (g > 0)
+    if not (bool(jnp.isfinite(g)) and float(g) > 0):
+        raise ValueError(
+            f"magnitude must be a positive, finite field magnitude (1 for unit output, 9.80665 "
+            f"for m/s^2, the local field in uT ...), got {float(g)!r}"
+        )
+    return True
+
+
+def _fail_if(fit: Fit, ok) -> Fit:
+    """Under jit: a non-positive or non-finite magnitude gives status FAILED, NaN params."""
+    if ok is True:
+        return fit
+    nan_params = jax.tree.map(lambda a: jnp.where(ok, a, jnp.nan), fit.params)
+    status = jnp.where(ok, fit.status, int(Status.FAILED)).astype(fit.status.dtype)
+    return eqx.tree_at(lambda f: (f.params, f.status), fit, (nan_params, status))
+
+
 def _float_dtype(raw: jax.Array):
     """The input's float dtype; integer counts are fitted in float64."""
     return raw.dtype if jnp.issubdtype(raw.dtype, jnp.floating) else jnp.float64
@@ -280,6 +303,9 @@ def fit_accel(
         Readings in any unit (counts, g, m/s^2), at rest in N >= 10 orientations.
     magnitude : scalar
         The reference |g| in the unit the calibrated output should have. Differentiable.
+        Must be positive and finite: a concrete value that is not raises ValueError; under
+        ``jit`` / ``vmap`` (a traced value) the Fit instead has status
+        :attr:`calib_jax.lm.Status.FAILED` (``converged`` False) and NaN ``params``.
     weights : (N,), optional
         Per-sample weights (0 masks a sample out). Differentiable. With
         ``absolute_sigma=True`` they are 1 / sigma^2, sigma the noise of |a| / g.
@@ -291,6 +317,7 @@ def fit_accel(
     vmappable (see :func:`fit_batch`); one compile per (N, dtype, static options).
     """
     raw, g, w = _prepare(raw, magnitude, weights)
+    g_ok = _magnitude_ok(g)
     m, s = _normalisation(raw, w)
     x = (raw - m) / s
     p0 = initial_guess(x, w)
@@ -308,7 +335,7 @@ def fit_accel(
     p = jnp.concatenate([s * pn[:6], s * pn[6:] + m])
     params = AccelParams.from_vector(p)
     D = s * jnp.eye(9, dtype=raw.dtype)
-    return _finish(params, res, D, raw, w, g)
+    return _fail_if(_finish(params, res, D, raw, w, g), g_ok)
 
 
 def fit_mag(
@@ -324,13 +351,15 @@ def fit_mag(
     symmetric W (9 parameters, the full ellipsoid of paper 2), from paper 2's constrained
     algebraic ellipsoid.
 
-    ``magnitude`` B is the field the output should have (1 for unit vectors, the local field
-    in uT, ...). Returns a :class:`Fit` with :class:`MagParams`, differentiable in ``raw``,
-    ``magnitude`` and ``weights``; jittable and vmappable. Needs a well-covered sphere of
-    orientations (see :func:`calib_jax.calibrate_mag` for the coverage checks and the smaller
-    sphere/diag models that partial coverage calls for).
+    ``magnitude`` B is the field the output should have (1 for unit vectors, the local field in
+    uT, ...); positive and finite, checked as in :func:`fit_accel` (ValueError when concrete;
+    status FAILED and NaN ``params`` under ``jit``). Returns a :class:`Fit` with
+    :class:`MagParams`, differentiable in ``raw``, ``magnitude`` and ``weights``; jittable and
+    vmappable. Needs a well-covered sphere of orientations (see :func:`calib_jax.calibrate_mag`
+    for the coverage checks and the smaller sphere/diag models that partial coverage calls for).
     """
     raw, B, w = _prepare(raw, magnitude, weights)
+    B_ok = _magnitude_ok(B)
     m, s = _normalisation(raw, w)
     x = (raw - m) / s
     c0, M0 = unpack(ellipsoid_start(x, w, "full"), "full")
@@ -351,7 +380,7 @@ def fit_mag(
     params = MagParams(hard_iron=c, soft_iron=W)
     # d(ravel(params))/d(pn): the covariance in the pytree's own coordinates
     embed = jax.jacfwd(lambda q: jnp.concatenate([s * q[6:] + m, (_sym(q[:6]) / s).ravel()]))
-    return _finish(params, res, embed(pn), raw, w, B)
+    return _fail_if(_finish(params, res, embed(pn), raw, w, B), B_ok)
 
 
 def fit_batch(
@@ -373,6 +402,12 @@ def fit_batch(
     dtype = _float_dtype(raw)
     raw = raw.astype(dtype)
     mag = jnp.broadcast_to(jnp.asarray(magnitude, dtype), raw.shape[:1])
+    if not isinstance(mag, jax.core.Tracer):  # concrete: say which sensor (vmap would not)
+        for k, v in enumerate(mag):
+            try:
+                _magnitude_ok(v)
+            except ValueError as exc:
+                raise ValueError(f"sensor {k}: {exc}") from None
     if weights is None:
         weights = jnp.ones(raw.shape[:2], dtype)
     return jax.vmap(lambda r, g, w: fit(r, g, w, **options))(raw, mag, weights)

@@ -32,7 +32,6 @@ Host side only: threads, files and printing; the fits are the package's jitted c
 from __future__ import annotations
 
 import itertools
-import json
 import sys
 import threading
 import time
@@ -42,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import split_params
+from .calibration import split_params, write_json_atomic
 from .io.serial import Batch, SerialReader, log_columns
 from .static import detect_static, distinct_directions
 
@@ -464,6 +463,9 @@ def calibrate_recording(
 ) -> dict[str, object]:
     """Calibrate one recorded log and write the JSON beside it; returns {name: result}.
 
+    The JSON is written atomically; when it cannot be (a full disk) the error is printed and
+    listed under ``"save_errors"``, and the log is left as it is.
+
     ``accel``: :class:`calib_jax.AccelCalibration`; ``mag``: :class:`calib_jax.MagCalibration`;
     ``marg``: both and, when the data allow it, the magnetometer-to-accelerometer rotation
     (:func:`calib_jax.align_mag_to_accel`, written as ``.align.json``).
@@ -476,6 +478,7 @@ def calibrate_recording(
     log = load_log(path)
     out = calibration_paths(path, sensor)
     results: dict[str, object] = {}
+    errors: list[str] = []  # JSON files that could not be written (a full disk)
     if sensor in ("accel", "marg"):
         cal = calibrate_accel(
             log,
@@ -485,13 +488,13 @@ def calibrate_recording(
             sensor_id=sensor_id,
             solver=solver,
         )
-        cal.save(out["accel"])
-        say(f"accelerometer, {path}:\n{cal.report()}\nwrote {out['accel']}")
+        wrote = _save(lambda: cal.save(out["accel"]), out["accel"], errors)
+        say(f"accelerometer, {path}:\n{cal.report()}\n{wrote[2:]}")
         results["accel"] = cal
     if sensor in ("mag", "marg"):
         mcal = calibrate_mag(log, field=field, sensor_id=sensor_id, solver=solver)
-        mcal.save(out["mag"])
-        say(f"magnetometer, {path}:\n{mcal.report()}\nwrote {out['mag']}")
+        wrote = _save(lambda: mcal.save(out["mag"]), out["mag"], errors)
+        say(f"magnetometer, {path}:\n{mcal.report()}\n{wrote[2:]}")
         results["mag"] = mcal
     if sensor == "marg":
         from .align import align_mag_to_accel
@@ -513,12 +516,14 @@ def calibrate_recording(
                 "n_used": al.n_used,
                 "source": str(path),
             }
-            Path(out["align"]).write_text(json.dumps(d, indent=2))
+            wrote = _save(lambda: write_json_atomic(out["align"], d), out["align"], errors)
             say(
                 f"accel-mag rotation: axes {al.permutation_text}, {al.rotation_deg:.2f} deg, "
-                f"dip {al.dip_deg:.2f} deg ({al.message}); wrote {out['align']}"
+                f"dip {al.dip_deg:.2f} deg ({al.message}){wrote}"
             )
             results["align"] = al
+    if errors:
+        results["save_errors"] = errors
     return results
 
 
@@ -554,7 +559,7 @@ def calibrate_devices(
     g), or 9.80665 when the static readings have norm 3-30 (m/s^2). Returns one dict per
     device (also what is written): ``{"accel": {...}, "mag": {...}}``.
     """
-    from .batch import calibrate_accel_batch, calibrate_mag_batch
+    from .batch import calibrate_accel_batch, calibrate_mag_batch, check_reference_magnitude
     from .io.files import load_log
     from .lm import is_converged, status_message
     from .padding import bucket
@@ -586,13 +591,21 @@ def calibrate_devices(
             mask[i, : len(x)] = m
         if kind == "accel":
             ref = g
+            norms = [
+                np.median(np.linalg.norm(x[m], axis=1))
+                for x, m in zip(xs, masks, strict=True)
+                if m.any()
+            ]
             if ref is None:
-                norms = [
-                    np.median(np.linalg.norm(x[m], axis=1))
-                    for x, m in zip(xs, masks, strict=True)
-                    if m.any()
-                ]
                 ref = 9.80665 if norms and 3.0 < float(np.median(norms)) <= 30.0 else 1.0
+            else:  # a given g must match each log's unit (m/s^2 data with g = 1: error)
+                for x, m, p in zip(xs, masks, paths, strict=True):
+                    if m.any():
+                        try:
+                            norm = float(np.median(np.linalg.norm(x[m], axis=1)))
+                            check_reference_magnitude(ref, None, norm)
+                        except ValueError as exc:
+                            raise ValueError(f"{p}: {exc}") from None
             r = calibrate_accel_batch(raw, mask, g=ref, solver=solver)
         else:
             r = calibrate_mag_batch(raw, mask, field=field, solver=solver)
@@ -625,9 +638,29 @@ def calibrate_devices(
             results[i][kind] = block
     for i, (res, p) in enumerate(zip(results, paths, strict=True)):
         target = Path(p).with_suffix(".calib.json")
-        target.write_text(json.dumps(res, indent=2))
-        say(f"[{i}] {res['sensor_id']}: " + _batch_line(res) + f"; wrote {target}")
+        errors: list[str] = []
+        wrote = _save(lambda t=target, r=res: write_json_atomic(t, r), target, errors)
+        say(f"[{i}] {res['sensor_id']}: " + _batch_line(res) + wrote)
+        if errors:
+            res["save_error"] = errors[0]  # not in the file (it could not be written)
     return results
+
+
+def _save(write: Callable[[], None], target: Path, errors: list[str]) -> str:
+    """Run ``write`` (an atomic JSON write); an OSError (a full disk) is reported on stderr
+    and appended to ``errors``, not raised: the recorded log stays as it is, and no partial
+    JSON is left behind."""
+    try:
+        write()
+    except OSError as exc:
+        msg = f"could not write {target}: {exc}"
+        errors.append(msg)
+        _stderr(
+            f"{msg}. The log is intact; free some space and calibrate it again "
+            "(calib-jax accel/mag LOG)"
+        )
+        return f"; NOT written: {target} ({exc.strerror or exc})"
+    return f"; wrote {target}"
 
 
 def _batch_line(res: dict) -> str:
@@ -712,6 +745,7 @@ def run(args) -> int:
                 solver=args.solver,
             )
             ok = session_ok(list(res[k] for k in res if k in ("accel", "mag")))
+            ok &= not res.get("save_errors")
         else:
             res = calibrate_devices(
                 paths,
@@ -723,7 +757,7 @@ def run(args) -> int:
                 sensor_ids=[d.url for d in session.devices],
                 solver=args.solver,
             )
-            ok = session_ok(res)
+            ok = session_ok(res) and not any("save_error" in r for r in res)
         ok &= not any(d.error for d in session.devices)  # said at the end of the session
     except ValueError as exc:
         raise ValueError(

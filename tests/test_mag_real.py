@@ -68,7 +68,10 @@ def test_qmc_sphere_needs_the_scaled_residual(qmc_noisy):
     away to a huge radius (a sphere far away fits a cap with a small relative error); the
     radius-scaled residual keeps it at the data's size."""
     cal = cj.calibrate_mag(qmc_noisy, model="sphere")
-    assert cal.status == "ok"
+    # converged, but a sphere leaves 17.7 % where the full ellipsoid leaves 6.2 % (issue 13:
+    # not "ok"; the warning says to use the full model)
+    assert cal.status == "poorly_determined" and cal.solver_status in (0, 1, 2, 8)
+    assert any("model='full'" in w for w in cal.warnings), cal.warnings
     assert 800 < cal.radius < 1600  # semi-axes 749..1626 counts
     x = qmc_noisy.mag
     xn = (x - x.mean(0)) / np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, 1)))

@@ -9,6 +9,7 @@ import threading
 import tty
 
 import numpy as np
+import pytest
 
 from calib_jax.cli import main
 from calib_jax.io.serial import LogWriter, format_row
@@ -247,3 +248,21 @@ def test_batch_of_marg_logs(tmp_path):
         np.testing.assert_allclose(r["mag"]["center"], tr["mag_center"], atol=0.05)
         np.testing.assert_allclose(r["mag"]["soft_iron"], tr["mag_soft_iron"], atol=2e-3)
         assert json.loads(paths[0].with_suffix(".calib.json").read_text())["mag"]["field"] == 45.0
+
+
+def test_batch_path_checks_g_against_the_unit(tmp_path):
+    """Issue 13: logs in m/s^2 (static norm 9.8) calibrated with g = 1 are refused with the
+    log named (the output would silently be in g with gains of 9.8); g = 9.80665 or no g
+    (detected from the norm) calibrate."""
+    paths = []
+    for k in range(2):
+        s = simulate_session(poses=24, hold=1.0, move=0.3, rate=100.0, seed=20 + k)
+        s = {**s, "acc": 9.80665 * s["acc"]}
+        _write_log(tmp_path / f"a{k}.csv", s)
+        paths.append(tmp_path / f"a{k}.csv")
+    with pytest.raises(ValueError, match=r"a0.csv: g = 1 does not match.*m/s\^2"):
+        calibrate_devices(paths, "accel", g=1.0, echo=None, **DETECT)
+    assert not any(p.with_suffix(".calib.json").exists() for p in paths)
+    for g in (9.80665, None):
+        res = calibrate_devices(paths, "accel", g=g, echo=None, **DETECT)
+        assert all(r["accel"]["status"] == "ok" and r["accel"]["g"] == 9.80665 for r in res)

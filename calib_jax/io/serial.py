@@ -36,12 +36,14 @@ column name, see :func:`calib_jax.io.canonical_name`) sets the layout when ``col
 given. Without a ``t`` column the host's clock (``time.monotonic`` from the session start)
 stamps the lines, spread evenly over the interval in which each read arrived.
 
-Durability: rows are written in whole lines, flushed to the OS every ``flush_interval``
-seconds (or ``flush_lines`` rows), and ``os.fsync``-ed every ``fsync_interval`` seconds, when
-the connection is lost, and on close (also on Ctrl-C inside ``with``). A killed process leaves
-every line up to the last flush intact; a line cut off by the end of the session is counted
-as ``partial``. An existing log is never truncated unless ``overwrite=True``; ``resume=True``
-appends to it after checking that its header matches.
+Durability: rows are written in whole lines and handed to the OS (written and flushed) after
+every read from the port, so a killed process (even SIGKILL) loses no line it has read; they
+are ``os.fsync``-ed every ``fsync_interval`` seconds, when the connection is lost, and on close
+(also on Ctrl-C inside ``with``), so a power loss loses at most the last ``fsync_interval``.
+(:class:`LogWriter` used on its own flushes every ``flush_interval`` seconds or ``flush_lines``
+rows.) A killed process leaves every line up to the last flush intact; a line cut off by the
+end of the session is counted as ``partial``. An existing log is never truncated unless
+``overwrite=True``; ``resume=True`` appends to it after checking that its header matches.
 
 By default pyserial's flush of the OS input buffer on open is skipped (``keep_pending``):
 bytes the device sent while the port was closed are data too.
@@ -1087,6 +1089,11 @@ class SerialReader:
                 self._in_stall = False
                 self._last_data = now
                 self._feed(data, now)
+                if self._writer is not None:
+                    # hand the rows of this read to the OS at once (write + flush, no fsync):
+                    # a killed process (SIGKILL) then loses nothing it has read; fsync stays on
+                    # its schedule (maybe_flush below), as it costs a disk round trip
+                    self._writer.flush()
             elif now - self._last_data > self.stall_seconds and not self._in_stall:
                 self._stall(now)
                 self._in_stall = True
