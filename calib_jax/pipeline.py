@@ -96,7 +96,7 @@ def _sym_vec(S: jax.Array) -> jax.Array:
 class MagParams(eqx.Module):
     """Hard and soft iron of one magnetometer (or any ellipsoid-to-sphere map)."""
 
-    hard_iron: Float[Array, 3]
+    hard_iron: Float[Array, "3"]
     """c: the reading at zero field, raw units."""
     soft_iron: Float[Array, "3 3"]
     """W: output units per raw unit; :func:`fit_mag` returns it symmetric (paper 2's
@@ -115,7 +115,7 @@ class MagParams(eqx.Module):
 class Rotation(eqx.Module):
     """A rotation by its rotation vector (axis times angle, rad): smooth near identity."""
 
-    rotvec: Float[Array, 3]
+    rotvec: Float[Array, "3"]
 
     @property
     def matrix(self) -> Float[Array, "3 3"]:
