@@ -519,7 +519,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--pattern", default="*.csv", help="file glob, searched recursively")
     b.add_argument("--sensor", default="accel", choices=["accel", "mag"])
     b.add_argument("--model", default=None, help="accel9|accel6 or sphere|diag|full")
-    b.add_argument("--g", type=_pos_float, default=1.0, help="accelerometer reference magnitude")
+    b.add_argument(
+        "--g",
+        type=_pos_float,
+        default=None,
+        help="accelerometer reference magnitude (default: each log's unit: 1 g or 9.80665 m/s^2)",
+    )
     b.add_argument("--field", type=_pos_float, default=None, help="magnetometer field magnitude")
     b.add_argument("--columns", default=None, help="column mapping for every file")
     b.add_argument("--chunk", type=_pos_int, default=256, help="files per batch fit")

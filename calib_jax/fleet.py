@@ -59,10 +59,23 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
     jax.config.update("jax_enable_x64", True)
     from .batch import calibrate_accel_batch, calibrate_mag_batch
 
-    prepared, out = [], []
+    from .batch import G_IN_UNITS, _units_from_norm, check_reference_magnitude
+
+    options = dict(options)
+    g_given = options.pop("g", None) if sensor == "accel" else None
+    prepared, out, gs = [], [], []
     for p in paths:
         try:
             x, m, info = prepare(p, sensor, columns)
+            if sensor == "accel":
+                # the reference magnitude follows each log's unit unless the user gave one,
+                # which must then fit that unit (m/s^2 logs with g = 1 gave gains of 9.8)
+                norm = float(np.median(np.linalg.norm(x[m], axis=1))) if m.any() else np.nan
+                unit = _units_from_norm(norm)
+                g = g_given if g_given is not None else G_IN_UNITS.get(unit or "", 1.0)
+                check_reference_magnitude(g, None, norm)
+                info.update(units=unit, g=float(g))
+                gs.append(float(g))
             prepared.append((p, x, m, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
             # ValueError/OSError carry a message meant for the user; anything else is a bug in
@@ -78,6 +91,8 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
             raw[i, : len(x)] = np.where(np.isfinite(x), x, 0.0)
             mask[i, : len(x)] = m
         fit = calibrate_accel_batch if sensor == "accel" else calibrate_mag_batch
+        if sensor == "accel":
+            options["g"] = np.asarray(gs)
         r = fit(raw, mask, **options)
         params, stderr = np.asarray(r.params), np.asarray(r.stderr)
         for i, (p, _, _, info) in enumerate(prepared):

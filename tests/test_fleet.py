@@ -72,6 +72,27 @@ def test_an_unexpected_error_in_one_file_is_that_files_entry(fleet_dir, monkeypa
     assert res[1]["status"] == "ok"
 
 
+def test_reference_magnitude_follows_each_logs_unit(fleet_dir, tmp_path):
+    """Without g each log is fitted to its own unit's |g| (a log in m/s^2 is the same board as
+    its copy in g: same gains, bias x 9.80665); a g that contradicts a log's unit is that log's
+    error, not gains of 9.8 reported as ok."""
+    d, truth = fleet_dir
+    src = sorted(truth)[0]
+    log = np.loadtxt(src, delimiter=",", skiprows=1)
+    ms2 = tmp_path / "imu_ms2.csv"
+    log[:, 1:] *= 9.80665
+    np.savetxt(ms2, log, delimiter=",", header="t,ax,ay,az", comments="")
+    res = list(calibrate_files([src, str(ms2)], progress=False))
+    assert [r["status"] for r in res] == ["ok", "ok"], res
+    assert res[0]["g"] == 1.0 and res[1]["g"] == 9.80665 and res[1]["units"] == "m/s^2"
+    p_g, p_ms2 = np.array(res[0]["params"]), np.array(res[1]["params"])
+    np.testing.assert_allclose(p_ms2[:6], p_g[:6], rtol=1e-7)  # gains: reading per reference
+    np.testing.assert_allclose(p_ms2[6:], 9.80665 * p_g[6:], rtol=1e-6, atol=1e-9)
+    res = list(calibrate_files([src, str(ms2)], g=1.0, progress=False))
+    assert res[0]["status"] == "ok"
+    assert res[1]["status"] == "load_error" and "does not match the data's unit" in res[1]["message"]
+
+
 def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
     d, truth = fleet_dir
     out = tmp_path / "fleet.json"
