@@ -57,9 +57,13 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from .batch import calibrate_accel_batch, calibrate_mag_batch
-
-    from .batch import G_IN_UNITS, _units_from_norm, check_reference_magnitude
+    from .batch import (
+        G_IN_UNITS,
+        _units_from_norm,
+        calibrate_accel_batch,
+        calibrate_mag_batch,
+        check_reference_magnitude,
+    )
 
     options = dict(options)
     g_given = options.pop("g", None) if sensor == "accel" else None

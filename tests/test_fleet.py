@@ -90,7 +90,8 @@ def test_reference_magnitude_follows_each_logs_unit(fleet_dir, tmp_path):
     np.testing.assert_allclose(p_ms2[6:], 9.80665 * p_g[6:], rtol=1e-6, atol=1e-9)
     res = list(calibrate_files([src, str(ms2)], g=1.0, progress=False))
     assert res[0]["status"] == "ok"
-    assert res[1]["status"] == "load_error" and "does not match the data's unit" in res[1]["message"]
+    assert res[1]["status"] == "load_error"
+    assert "does not match the data's unit" in res[1]["message"]
 
 
 def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
