@@ -725,15 +725,20 @@ def run(args) -> int:
     ]
     if empty:
         old = [str(d.path) for d in empty if d.path.exists()]
-        raise ValueError(
+        msg = (
             f"nothing was recorded into {', '.join(str(d.path) for d in empty)} (no well-formed "
             "line arrived); check --port, --baud and --columns"
             + (f"; {', '.join(old)} is left as it was" if old else "")
         )
-    paths = [d.path for d in session.devices]
+        if len(empty) == len(session.devices):
+            raise ValueError(msg)
+        # one dead board must not cost the others their calibration: go on without it
+        _stderr(f"{msg}; calibrating the other {len(session.devices) - len(empty)} device(s)")
+    live = [d for d in session.devices if d not in empty]
+    paths = [d.path for d in live]
     try:
-        if len(session.devices) == 1:
-            dev = session.devices[0]
+        if len(live) == 1:
+            dev = live[0]
             res = calibrate_recording(
                 dev.path,
                 args.sensor,
@@ -754,11 +759,12 @@ def run(args) -> int:
                 field=args.field,
                 window=args.window,
                 min_static=args.min_static,
-                sensor_ids=[d.url for d in session.devices],
+                sensor_ids=[d.url for d in live],
                 solver=args.solver,
             )
             ok = session_ok(res) and not any("save_error" in r for r in res)
         ok &= not any(d.error for d in session.devices)  # said at the end of the session
+        ok &= not empty
     except ValueError as exc:
         raise ValueError(
             f"{exc}\nthe recording is kept in {', '.join(map(str, paths))}; add to it with "

@@ -207,6 +207,36 @@ def test_nothing_recorded_is_an_error_and_the_old_file_is_left(tmp_path, capsys)
     assert out.read_bytes() == before and not out.with_suffix(".calib.json").exists()
 
 
+def test_one_dead_board_does_not_cost_the_other_its_calibration(tmp_path, capsys, monkeypatch):
+    """Two ports, one of which sent nothing: the live board's complete log is calibrated and its
+    JSON written, the dead one is named on stderr, and the exit code says not everything
+    worked (it used to refuse the whole session)."""
+    import types
+
+    import calib_jax.record as record
+
+    good, dead = tmp_path / "rec.dev0.csv", tmp_path / "rec.dev1.csv"
+    _write_log(good, simulate_session(poses=24, hold=1.5, move=0.4, rate=100.0, seed=5))
+
+    def device(path, lines):
+        stats = types.SimpleNamespace(lines_ok=lines)
+        return record.Device(url=str(path), path=path, reader=types.SimpleNamespace(stats=stats))
+
+    session = record.Session(
+        devices=[device(good, 1000), device(dead, 0)], sensor="accel", reason="devices_gone",
+        seconds=1.0,
+    )
+    monkeypatch.setattr(record, "record_session", lambda *a, **k: session)
+    rc = main(["record", "--port", "a", "--port", "b", "--out", str(tmp_path / "rec.csv")])
+    err = capsys.readouterr().err
+    assert rc == 1, err
+    assert "nothing was recorded into" in err and str(dead) in err
+    assert "calibrating the other 1 device" in err
+    res = json.loads(good.with_suffix(".calib.json").read_text())
+    assert res["status"] == "ok" if "status" in res else res["accel"]["status"] == "ok"
+    assert not dead.with_suffix(".calib.json").exists()
+
+
 def test_resumed_rows_count_towards_the_coverage(tmp_path):
     """--resume to add the missing poses: the progress counts the poses already in the log."""
     out = tmp_path / "rec.csv"
