@@ -1,17 +1,43 @@
-"""Static-interval detection by moving variance (paper 1, section 3).
+"""Static-interval detection by moving variance (paper 1, section 3), settings chosen from the data.
 
 "We need to exclude measurements where the sensor is not static ... by observing the temporal
 variance of the data signal. In static position the accelerometer has a low variance."
 
-The detector computes the variance of each axis over a centred moving window, sums the three,
-and calls a sample static when that sum is below a threshold. Runs of static samples shorter
-than a minimum duration are dropped. Host-side numpy: it runs once per log, before any fit.
+One setting (window w, threshold factor f): the variance of each axis over a centred window of
+w samples, summed over the axes, is compared with f times the noise level (the 10th percentile
+of that moving variance: any calibration log spends well over 10 % of its time at rest). Runs of
+static samples at least ``min_samples`` long are kept, and each run loses ``trim`` samples at
+both ends (default half a window, at most a quarter of the run) so that the slow start and end
+of a hand motion, quiet enough to pass the threshold, do not leak into the interval means.
 
-Automatic threshold: the 10th percentile of the moving variance is taken as the noise level
-(any calibration log spends well over 10 % of its time at rest) and the threshold is
-``threshold_factor`` (default 6) times that. With a centred window of w samples the variance
-of pure white noise scatters by about sqrt(2/w) of its mean, so 6x the noise level rejects
-motion without cutting static poses at their noisier samples.
+No one setting suits every log: a 1 s window merges 0.5 s poses into the motion around them, a
+5-sample window splits a hand-held pose at its tremor. Like imu_tk (Tedaldi et al. 2014,
+section IV-A), which sweeps the threshold multiplier and keeps the setting whose calibration
+fits best, the detector sweeps a grid of (window, factor) candidates and scores each with a
+cheap host-side fit of its interval means: an algebraic ellipsoid (nine parameters, the same
+count as paper 1's model), with
+
+    score = rms_dof / sqrt(n_poses),   rms_dof = sqrt(sum r_i^2 / (n - 9)),
+
+r_i = sqrt((m_i - c)' M (m_i - c)) - 1 the radial residual of mean i, n the number of intervals
+and n_poses the number of distinct gravity directions among them (occupied cells of a ~10
+degree grid on the sphere). The score is a proxy for the standard error of the parameters: it
+falls with every genuine pose found and with longer, quieter intervals; it rises when motion
+leaks into a mean (larger residual), and splitting one pose in two adds intervals but no pose.
+A candidate needs at least 12 intervals and 12 distinct poses (9 parameters and some
+redundancy). When no candidate qualifies (six-face protocols, one long rest, tumbles), the
+classic setting is kept: a 1 s window (100 samples without a rate), factor 6, runs of at
+least one window.
+
+Explicit ``window``, ``threshold_factor``, ``threshold``, ``min_duration`` / ``min_samples``
+and ``trim`` fix their dimension of the sweep; the rest is still chosen.
+
+Pose tables (one row per pose, already averaged, no time column; Magneto's input format) are
+recognised before any of this: neighbouring rows lie far apart compared with the spread of the
+data, and there are few rows. Each row is then one interval of one sample.
+
+Host-side numpy; the log is read once: cumulative sums of the centred data give every window's
+moving variance and every interval's mean in O(N).
 """
 
 from __future__ import annotations
@@ -20,17 +46,43 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# classic single setting (kept when no sweep candidate can be scored)
+DEFAULT_FACTOR = 6.0
+DEFAULT_WINDOW_S = 1.0
+DEFAULT_WINDOW_SAMPLES = 100
+# threshold multipliers swept (geometric, 1.5 ... 200: at a 3-sample window the 10th
+# percentile of the moving variance at rest is ~0.4 of its mean and its 99.9th ~3.7, so static
+# samples need factors near 10; a long window at rest scatters little and needs ~2)
+FACTOR_GRID = (1.5, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0, 20.0, 30.0, 50.0, 80.0, 150.0)
+# windows swept: geometric from 3 samples (or 0.05 s) to 1 s (or, without a rate, to N/50,
+# at most 1000 samples)
+N_WINDOWS = 8
+MIN_WINDOW_S = 0.05
+# shortest run kept by the sweep when the rate is known (s); else one window
+MIN_RUN_S = 0.25
+# scoring
+MIN_POSES = 12
+N_PARAMS = 9
+# scores closer than this (relative) are statistically the same: the dof-corrected rms of
+# n - 9 residuals scatters by 1 / sqrt(2 (n - 9)), 10 % at n = 60
+SCORE_TIE = 0.1
+# pose tables
+POSE_TABLE_MAX_ROWS = 10_000
+POSE_TABLE_STEP = 0.1
+"""Rows are poses when their 25th-percentile neighbour distance exceeds this fraction of the
+data's rms radius (a time series at rest has neighbour distances at the noise level)."""
+
 
 @dataclass(frozen=True)
 class StaticInterval:
-    """One run of static samples, [start, stop) in sample indices of the log."""
+    """One run of static samples, [start, stop) in sample indices of the log (after trimming)."""
 
     start: int
     stop: int
     mean: np.ndarray
     """Mean reading over the interval (3,)."""
     std: np.ndarray
-    """Per-axis standard deviation of the readings (3,)."""
+    """Per-axis standard deviation of the readings (3,); NaN for a one-sample interval."""
 
     @property
     def n(self) -> int:
@@ -38,8 +90,37 @@ class StaticInterval:
 
 
 @dataclass(frozen=True)
+class Candidate:
+    """One detector setting tried by the sweep, and how its interval means fit."""
+
+    window: int
+    factor: float | None
+    """Threshold factor (None when a fixed threshold was given)."""
+    threshold: float
+    n_intervals: int
+    n_poses: int
+    """Distinct gravity directions among the interval means (~10 degree cells)."""
+    rms: float
+    """Dof-corrected radial rms of the algebraic ellipsoid fit to the means (fraction of the
+    radius); NaN when it could not be scored."""
+    score: float
+    """rms / sqrt(n_poses); lower is better; inf when not scorable."""
+
+    def to_dict(self) -> dict:
+        return {
+            "window": self.window,
+            "factor": self.factor,
+            "threshold": self.threshold,
+            "n_intervals": self.n_intervals,
+            "n_poses": self.n_poses,
+            "rms": None if not np.isfinite(self.rms) else self.rms,
+            "score": None if not np.isfinite(self.score) else self.score,
+        }
+
+
+@dataclass(frozen=True)
 class StaticReport:
-    """What the detector found, and the settings that found it."""
+    """What the detector found, the settings that found it, and the candidates it tried."""
 
     intervals: list[StaticInterval]
     mask: np.ndarray
@@ -51,8 +132,21 @@ class StaticReport:
     window: int
     """Moving-window length in samples."""
     min_samples: int
-    """Shortest interval kept, in samples."""
+    """Shortest run kept, in samples (before trimming)."""
     automatic: bool = field(default=True)
+    """True when the threshold came from the noise level (not a fixed ``threshold``)."""
+    factor: float | None = None
+    """Threshold factor of the chosen setting."""
+    trim: int = 0
+    """Samples cut from each end of every run (at most a quarter of the run)."""
+    kind: str = "log"
+    """'log' (a time series) or 'pose_table' (one row per pose)."""
+    how: str = "given"
+    """'sweep' (chosen by score), 'default' (no candidate scorable: classic setting), 'given'
+    (every setting explicit) or 'pose_table'."""
+    candidates: list[Candidate] = field(default_factory=list)
+    chosen: int | None = None
+    """Index of the chosen setting in ``candidates``."""
 
     @property
     def n_intervals(self) -> int:
@@ -62,6 +156,80 @@ class StaticReport:
         """Interval means (n_intervals, 3)."""
         return np.array([iv.mean for iv in self.intervals]).reshape(-1, 3)
 
+    def setting(self, sample_rate: float | None = None) -> str:
+        """The chosen setting in words."""
+        if self.kind == "pose_table":
+            return f"pose table: {len(self.intervals)} rows, each row taken as one pose"
+        w = f"window {self.window} samples"
+        if sample_rate:
+            w += f" ({self.window / sample_rate:.3g} s)"
+        f = (
+            f"threshold {self.factor:g} x noise level {self.noise_level:.3g}"
+            if self.factor is not None
+            else f"threshold {self.threshold:.3g} (given)"
+        )
+        how = {
+            "sweep": f"chosen by fit score from {len(self.candidates)} candidates",
+            "default": (
+                f"classic default: none of {len(self.candidates)} candidates found "
+                f"{MIN_POSES} distinct poses to score"
+            ),
+            "given": "as given",
+        }[self.how]
+        return (
+            f"static detection: {w}, {f}, runs of at least {self.min_samples} samples, "
+            f"{self.trim} samples trimmed from each end ({how})"
+        )
+
+    def candidates_table(self, max_rows: int | None = None) -> str:
+        """The candidates as a text table, best score first (``*`` marks the chosen one)."""
+        if not self.candidates:
+            return ""
+        order = sorted(
+            range(len(self.candidates)),
+            key=lambda i: (not np.isfinite(self.candidates[i].score), self.candidates[i].score),
+        )
+        if max_rows is not None:
+            order = order[:max_rows]
+        lines = [f"  {'window':>6} {'factor':>6} {'intervals':>9} {'poses':>5} {'rms':>9} score"]
+        for i in order:
+            c = self.candidates[i]
+            mark = "*" if i == self.chosen else " "
+            fac = "-" if c.factor is None else f"{c.factor:g}"
+            lines.append(
+                f"{mark} {c.window:>6} {fac:>6} {c.n_intervals:>9} {c.n_poses:>5} "
+                f"{c.rms:>9.3g} {c.score:.3g}"
+            )
+        return "\n".join(lines)
+
+    def poses_by_candidate(self) -> str:
+        """One line: poses found by each window at each factor (a compact candidates table)."""
+        if not self.candidates:
+            return ""
+        out = []
+        for w in sorted({c.window for c in self.candidates}):
+            row = [c for c in self.candidates if c.window == w]
+            out.append(
+                f"w={w}: "
+                + " ".join(
+                    f"{'-' if c.factor is None else f'{c.factor:g}'}:{c.n_poses}" for c in row
+                )
+            )
+        return "; ".join(out)
+
+    def notes(self, sample_rate: float | None = None) -> list[str]:
+        """What a calibration report should say about detection (setting, found, candidates)."""
+        out = [self.setting(sample_rate)]
+        if self.kind == "pose_table":
+            return out
+        out.append(self.summary(sample_rate))
+        if len(self.candidates) > 1:
+            out.append(
+                "static detection candidates (window: factor:distinct poses): "
+                + self.poses_by_candidate()
+            )
+        return out
+
     def summary(self, sample_rate: float | None = None) -> str:
         """A one-paragraph report of the intervals found."""
         lens = np.array([iv.n for iv in self.intervals])
@@ -69,6 +237,8 @@ class StaticReport:
         if sample_rate:
             lens = lens / sample_rate
             unit = "s"
+        if self.kind == "pose_table":
+            return self.setting(sample_rate)
         if len(lens) == 0:
             return "no static intervals"
         how = "automatic" if self.automatic else "given"
@@ -79,19 +249,42 @@ class StaticReport:
             f"{self.threshold:.3g} ({how}), window {self.window} samples"
         )
 
+    def to_dict(self) -> dict:
+        """JSON-ready summary (no per-sample mask)."""
+        return {
+            "kind": self.kind,
+            "how": self.how,
+            "window": self.window,
+            "factor": self.factor,
+            "threshold": self.threshold,
+            "noise_level": self.noise_level,
+            "min_samples": self.min_samples,
+            "trim": self.trim,
+            "n_intervals": self.n_intervals,
+            "intervals": [[iv.start, iv.stop] for iv in self.intervals],
+            "chosen": self.chosen,
+            "candidates": [c.to_dict() for c in self.candidates],
+        }
 
-def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
-    """Sum over axes of the per-axis variance in a centred window of ``window`` samples.
 
-    Edges use the part of the window inside the log. Computed with cumulative sums of the
-    mean-removed data (O(N), numerically safe for raw counts near 32768).
-    """
-    x = np.asarray(x, float)
-    x = x - x.mean(axis=0)
-    n = len(x)
+# ---------------------------------------------------------------------------------------------
+# building blocks
+
+
+def _cumsums(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean of x, and cumulative sums of the centred data and of its square, each (N+1, 3)."""
+    mu = x.mean(axis=0)
+    xc = x - mu
+    c1 = np.zeros((len(x) + 1, 3))
+    c2 = np.zeros((len(x) + 1, 3))
+    np.cumsum(xc, axis=0, out=c1[1:])
+    np.cumsum(xc * xc, axis=0, out=c2[1:])
+    return mu, c1, c2
+
+
+def _moving_variance(c1: np.ndarray, c2: np.ndarray, window: int) -> np.ndarray:
+    n = len(c1) - 1
     half = window // 2
-    c1 = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
-    c2 = np.vstack([np.zeros((1, 3)), np.cumsum(x * x, axis=0)])
     idx = np.arange(n)
     lo = np.clip(idx - half, 0, n)
     hi = np.clip(idx + half + 1, 0, n)
@@ -102,77 +295,347 @@ def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
     return var.sum(axis=1)
 
 
+def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
+    """Sum over axes of the per-axis variance in a centred window of ``window`` samples.
+
+    Edges use the part of the window inside the log. Computed with cumulative sums of the
+    mean-removed data (O(N), numerically safe for raw counts near 32768).
+    """
+    _, c1, c2 = _cumsums(np.asarray(x, float))
+    return _moving_variance(c1, c2, window)
+
+
+def _noise_level(mv: np.ndarray) -> float:
+    if mv.size == 0:
+        return float("nan")
+    noise = float(np.percentile(mv, 10))
+    if noise <= 0:  # quantised data resting on one count: use the quiet samples that move
+        pos = mv[mv > 0]
+        noise = float(np.percentile(pos, 10)) if pos.size else 0.0
+    return noise
+
+
+def _runs(still: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def _trimmed(
+    starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int
+) -> tuple[np.ndarray, np.ndarray]:
+    keep = stops - starts >= min_run
+    a, b = starts[keep], stops[keep]
+    t = np.minimum(trim, (b - a) // 4)
+    return a + t, b - t
+
+
+def _fibonacci_sphere(n: int = 412) -> np.ndarray:
+    """n nearly uniform unit vectors (spacing ~ sqrt(4 pi / n) rad: 10 degrees for 412)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = np.pi * (1 + 5**0.5) * i
+    r = np.sqrt(1 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+_CELLS = _fibonacci_sphere()
+
+
+def ellipsoid_score(means: np.ndarray) -> tuple[float, int]:
+    """(rms_dof, n_poses) of an algebraic ellipsoid fit to interval means (module docstring).
+
+    rms_dof is NaN when the fit is not possible (fewer than 10 means, or no ellipsoid).
+    """
+    m = np.asarray(means, float)
+    n = len(m)
+    if n <= N_PARAMS:
+        return float("nan"), 0
+    m0 = m.mean(axis=0)
+    s = float(np.sqrt(np.mean(np.sum((m - m0) ** 2, axis=1))))
+    if not np.isfinite(s) or s <= 0:
+        return float("nan"), 0
+    u = (m - m0) / s
+    x, y, z = u.T
+    D = np.stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z], 1)
+    v, *_ = np.linalg.lstsq(D, np.ones(n), rcond=None)
+    A = np.array([[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]])
+    try:
+        c = -np.linalg.solve(A, v[6:9])
+    except np.linalg.LinAlgError:
+        return float("nan"), 0
+    k = 1.0 + c @ A @ c
+    M = A / k
+    if not np.all(np.isfinite(M)) or np.linalg.eigvalsh(M)[0] <= 0:
+        return float("nan"), 0
+    d = u - c
+    q = np.einsum("ni,ij,nj->n", d, M, d)
+    r = np.sqrt(np.maximum(q, 0.0)) - 1.0
+    rms = float(np.sqrt(np.sum(r * r) / (n - N_PARAMS)))
+    dirs = d / np.linalg.norm(d, axis=1, keepdims=True)
+    n_poses = int(np.unique(np.argmax(dirs @ _CELLS.T, axis=1)).size)
+    return rms, n_poses
+
+
+def looks_like_pose_table(x: np.ndarray) -> bool:
+    """True for few rows that lie far apart from their neighbours (module docstring)."""
+    x = np.asarray(x, float)
+    n = len(x)
+    if n < N_PARAMS + 1 or n > POSE_TABLE_MAX_ROWS:
+        return False
+    spread = float(np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, axis=1))))
+    if not np.isfinite(spread) or spread <= 0:
+        return False
+    step = np.linalg.norm(np.diff(x, axis=0), axis=1)
+    return bool(np.percentile(step, 25) > POSE_TABLE_STEP * spread)
+
+
+def _window_grid(n: int, sample_rate: float | None) -> list[int]:
+    if sample_rate:
+        lo = max(3, int(round(MIN_WINDOW_S * sample_rate)))
+        hi = max(lo, int(round(DEFAULT_WINDOW_S * sample_rate)))
+    else:
+        lo = 3
+        hi = max(lo, min(1000, n // 50))
+    hi = max(3, min(hi, max(3, n // 4)))
+    lo = min(lo, hi)
+    return sorted({int(round(w)) for w in np.geomspace(lo, hi, N_WINDOWS)})
+
+
+def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
+    """Index of the best candidate: among those whose score is within ``SCORE_TIE`` of the
+    lowest (statistically the same fit), the most distinct poses, then the fewest intervals
+    (fewest split poses), then the most static samples."""
+    ok = [i for i, c in enumerate(candidates) if np.isfinite(c.score)]
+    if not ok:
+        return None
+    lowest = min(candidates[i].score for i in ok)
+    tied = [i for i in ok if candidates[i].score <= lowest * (1 + SCORE_TIE)]
+    return min(
+        tied,
+        key=lambda i: (-candidates[i].n_poses, candidates[i].n_intervals, -covered[i]),
+    )
+
+
+def _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim):
+    if window is not None and (not np.isfinite(window) or int(window) != window or window < 3):
+        raise ValueError(
+            f"window={window!r}: the moving-variance window must be a whole number of at least "
+            "3 samples; pass a larger --window, or leave it out to let the detector choose"
+        )
+    if threshold_factor is not None and not (np.isfinite(threshold_factor) and threshold_factor > 0):
+        raise ValueError(
+            f"threshold_factor={threshold_factor!r}: it multiplies the noise level and must be "
+            "a positive number (6 is the classic value); leave it out to let the detector choose"
+        )
+    if threshold is not None and not (np.isfinite(threshold) and threshold > 0):
+        raise ValueError(
+            f"threshold={threshold!r}: a fixed threshold on the moving variance must be a "
+            "positive number in input units squared; leave it out for an automatic one"
+        )
+    if min_duration is not None and not (np.isfinite(min_duration) and min_duration >= 0):
+        raise ValueError(
+            f"min_duration={min_duration!r}: the shortest static interval must be zero or more "
+            "seconds; pass a non-negative --min-static, or leave it out"
+        )
+    if min_samples is not None and not (np.isfinite(min_samples) and min_samples >= 0):
+        raise ValueError(
+            f"min_samples={min_samples!r}: the shortest static interval must be zero or more "
+            "samples; pass a non-negative value, or leave it out"
+        )
+    if trim is not None and not (np.isfinite(trim) and trim >= 0):
+        raise ValueError(
+            f"trim={trim!r}: samples cut from each end of an interval must be zero or more; "
+            "leave it out for half a window"
+        )
+
+
+def _pose_table_report(x: np.ndarray, valid: np.ndarray) -> StaticReport:
+    idx = np.flatnonzero(valid)
+    intervals = [
+        StaticInterval(start=int(i), stop=int(i) + 1, mean=x[i].copy(), std=np.full(3, np.nan))
+        for i in idx
+    ]
+    return StaticReport(
+        intervals=intervals,
+        mask=valid.copy(),
+        threshold=float("nan"),
+        noise_level=float("nan"),
+        window=1,
+        min_samples=1,
+        automatic=False,
+        kind="pose_table",
+        how="pose_table",
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the detector
+
+
 def detect_static(
     x: np.ndarray,
     *,
     sample_rate: float | None = None,
     window: int | None = None,
     threshold: float | None = None,
-    threshold_factor: float = 6.0,
+    threshold_factor: float | None = None,
     min_duration: float | None = None,
     min_samples: int | None = None,
     valid: np.ndarray | None = None,
+    trim: int | None = None,
+    pose_table: bool | None = None,
 ) -> StaticReport:
-    """Find the static intervals of a log of 3-axis readings.
+    """Find the static intervals of a log of 3-axis readings (module docstring).
 
     Parameters
     ----------
     x : (N, 3) array
         Readings, any unit.
     sample_rate : float, optional
-        Hz. With it, ``window`` defaults to 1 s and ``min_duration`` to 1 s; without it, to
-        100 samples and 100 samples.
+        Hz. Sets the window grid (0.05 s to 1 s) and the shortest run (0.25 s); without it the
+        windows run from 3 samples to N/50 (at most 1000).
+    window : int, optional
+        Moving-window length in samples (at least 3). Default: swept.
     threshold : float, optional
-        Fixed threshold on the summed moving variance (input units squared). Default: automatic
-        (module docstring).
-    threshold_factor : float
-        Multiple of the noise level used by the automatic threshold.
+        Fixed threshold on the summed moving variance (input units squared). Default: a factor
+        times the noise level.
+    threshold_factor : float, optional
+        Multiple of the noise level (positive). Default: swept over ``FACTOR_GRID``.
     min_duration : float, optional
-        Shortest interval kept, in seconds (needs ``sample_rate``); or give ``min_samples``.
+        Shortest run kept, in seconds (needs ``sample_rate``); or give ``min_samples``. Default:
+        one window, and with a rate at least 0.25 s.
     valid : (N,) bool array, optional
         Samples allowed in intervals (False for non-finite or saturated samples).
+    trim : int, optional
+        Samples cut from each end of every run (at most a quarter of the run). Default: half a
+        window.
+    pose_table : bool, optional
+        True: every row is a pose; False: never; default: recognised when there is no sample
+        rate, no explicit setting, few rows and neighbouring rows far apart.
+
+    Raises
+    ------
+    ValueError
+        For an invalid explicit option (window < 3, threshold or factor not positive, negative
+        minimum duration or trim), or ``min_duration`` without ``sample_rate``.
     """
+    _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim)
     x = np.asarray(x, float)
     n = len(x)
-    if window is None:
-        window = int(round(sample_rate)) if sample_rate else 100
-    window = max(int(window), 3)
-    if min_samples is None:
-        if min_duration is not None:
-            if not sample_rate:
-                raise ValueError("min_duration needs sample_rate; or give min_samples instead")
-            min_samples = int(round(min_duration * sample_rate))
-        else:
-            min_samples = window
     valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
-    mv = moving_variance(np.where(valid[:, None], x, np.nan_to_num(x[valid].mean(axis=0))), window)
-    usable = mv[valid]
-    noise = float(np.percentile(usable, 10)) if usable.size else float("nan")
-    automatic = threshold is None
-    if automatic:
-        threshold = threshold_factor * noise if noise > 0 else float(np.finfo(float).tiny)
-    still = (mv <= threshold) & valid
-    # runs of True
-    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
-    starts = np.flatnonzero(d == 1)
-    stops = np.flatnonzero(d == -1)
+    if min_duration is not None and min_samples is None and not sample_rate:
+        raise ValueError("min_duration needs sample_rate; or give min_samples instead")
+
+    explicit = window is not None or threshold is not None or threshold_factor is not None
+    if pose_table is None:
+        pose_table = (
+            not sample_rate
+            and not explicit
+            and min_samples is None
+            and looks_like_pose_table(x[valid])
+        )
+    if pose_table:
+        return _pose_table_report(x, valid)
+
+    fill = x[valid].mean(axis=0) if valid.any() else np.zeros(3)
+    xv = np.where(valid[:, None], x, fill)
+    mu, c1, c2 = _cumsums(xv)
+
+    windows = [int(window)] if window is not None else _window_grid(n, sample_rate)
+    if threshold is not None:
+        factors: list[float | None] = [None]
+    elif threshold_factor is not None:
+        factors = [float(threshold_factor)]
+    else:
+        factors = list(FACTOR_GRID)
+
+    def min_run_for(w: int) -> int:
+        if min_samples is not None:
+            return int(min_samples)
+        if min_duration is not None:
+            return int(round(min_duration * sample_rate))
+        if sample_rate and window is None:
+            return max(w, int(round(MIN_RUN_S * sample_rate)))
+        return w
+
+    def trim_for(w: int) -> int:
+        return int(trim) if trim is not None else w // 2
+
+    def run(w: int, f: float | None, mv: np.ndarray, noise: float):
+        thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
+        starts, stops = _runs((mv <= thr) & valid)
+        a, b = _trimmed(starts, stops, min_run_for(w), trim_for(w))
+        return float(thr), a, b
+
+    single = len(windows) * len(factors) == 1
+    candidates: list[Candidate] = []
+    settings: list[tuple[int, float | None, float, float]] = []  # (w, f, thr, noise)
+    noises: dict[int, float] = {}
+    covered: list[int] = []
+    for w in windows:
+        mv = _moving_variance(c1, c2, w)
+        noise = _noise_level(mv[valid])
+        noises[w] = noise
+        for f in factors:
+            thr, a, b = run(w, f, mv, noise)
+            if single:
+                settings.append((w, f, thr, noise))
+                break
+            means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
+            rms, n_poses = ellipsoid_score(means)
+            ok = np.isfinite(rms) and len(a) >= MIN_POSES and n_poses >= MIN_POSES
+            score = rms / np.sqrt(n_poses) if ok else float("inf")
+            candidates.append(Candidate(w, f, thr, len(a), n_poses, rms, float(score)))
+            settings.append((w, f, thr, noise))
+            covered.append(int(np.sum(b - a)))
+
+    best = _choose(candidates, covered)
+
+    if single:
+        how, chosen = "given", None
+        w, f, thr, noise = settings[0]
+    elif best is not None:
+        how, chosen = "sweep", best
+        w, f, thr, noise = settings[best]
+    else:  # nothing scorable: the classic setting (or the closest to it in the grid)
+        how = "default"
+        w0 = window or (
+            int(round(DEFAULT_WINDOW_S * sample_rate)) if sample_rate else DEFAULT_WINDOW_SAMPLES
+        )
+        w0 = max(3, min(w0, max(3, n // 4))) if window is None else w0
+        f0 = None if threshold is not None else (threshold_factor or DEFAULT_FACTOR)
+        chosen = next(
+            (i for i, (ww, ff, _, _) in enumerate(settings) if ww == w0 and ff == f0), None
+        )
+        w, f = w0, f0
+        noise = noises.get(w0)
+        if noise is None:
+            noise = _noise_level(_moving_variance(c1, c2, w0)[valid])
+        thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
+
+    mv = _moving_variance(c1, c2, w)
+    thr, a, b = run(w, f, mv, noise)
     intervals = []
     mask = np.zeros(n, bool)
-    for a, b in zip(starts, stops, strict=True):
-        if b - a >= min_samples:
-            seg = x[a:b]
-            intervals.append(
-                StaticInterval(start=int(a), stop=int(b), mean=seg.mean(0), std=seg.std(0, ddof=1))
-            )
-            mask[a:b] = True
+    for s, e in zip(a, b, strict=True):
+        seg = x[s:e]
+        std = seg.std(0, ddof=1) if e - s > 1 else np.full(3, np.nan)
+        intervals.append(StaticInterval(start=int(s), stop=int(e), mean=seg.mean(0), std=std))
+        mask[s:e] = True
     return StaticReport(
         intervals=intervals,
         mask=mask,
-        threshold=float(threshold),
-        noise_level=noise,
-        window=window,
-        min_samples=int(min_samples),
-        automatic=automatic,
+        threshold=float(thr),
+        noise_level=float(noise),
+        window=int(w),
+        min_samples=int(min_run_for(w)),
+        automatic=threshold is None,
+        factor=f,
+        trim=int(trim_for(w)),
+        kind="log",
+        how=how,
+        candidates=candidates,
+        chosen=chosen,
     )
 
 
