@@ -20,8 +20,7 @@ count as paper 1's model), with
     score = rms_dof / sqrt(n_poses),   rms_dof = sqrt(sum r_i^2 / (n - 9)),
 
 r_i = sqrt((m_i - c)' M (m_i - c)) - 1 the radial residual of mean i, n the number of intervals
-and n_poses the number of distinct gravity directions among them (occupied cells of a ~10
-degree grid on the sphere). The score is a proxy for the standard error of the parameters: it
+and n_poses the number of distinct gravity directions among them (10 degrees apart, greedy). The score is a proxy for the standard error of the parameters: it
 falls with every genuine pose found and with longer, quieter intervals; it rises when motion
 leaks into a mean (larger residual), and splitting one pose in two adds intervals but no pose.
 A candidate needs at least 12 intervals and 12 distinct poses (9 parameters and some
@@ -63,6 +62,9 @@ MIN_RUN_S = 0.25
 # scoring
 MIN_POSES = 12
 N_PARAMS = 9
+# means further than this many robust standard deviations off the fitted ellipsoid are pauses
+# inside a motion (gravity plus the hand's acceleration), not poses
+OFF_SPHERE = 8.0
 # scores closer than this (relative) are statistically the same: the dof-corrected rms of
 # n - 9 residuals scatters by 1 / sqrt(2 (n - 9)), 10 % at n = 60
 SCORE_TIE = 0.1
@@ -99,12 +101,16 @@ class Candidate:
     threshold: float
     n_intervals: int
     n_poses: int
-    """Distinct gravity directions among the interval means (~10 degree cells)."""
+    """Distinct gravity directions among the interval means (10 degrees apart)."""
     rms: float
     """Dof-corrected radial rms of the algebraic ellipsoid fit to the means (fraction of the
     radius); NaN when it could not be scored."""
     score: float
     """rms / sqrt(n_poses); lower is better; inf when not scorable."""
+    n_off: int = 0
+    """Intervals left out as pauses in motion (off the fitted ellipsoid)."""
+    n_cut: int = 0
+    """Intervals that continue a run cut by an invalid sample (not split by the detector)."""
 
     def to_dict(self) -> dict:
         return {
@@ -115,6 +121,7 @@ class Candidate:
             "n_poses": self.n_poses,
             "rms": None if not np.isfinite(self.rms) else self.rms,
             "score": None if not np.isfinite(self.score) else self.score,
+            "n_off": self.n_off,
         }
 
 
@@ -147,6 +154,9 @@ class StaticReport:
     candidates: list[Candidate] = field(default_factory=list)
     chosen: int | None = None
     """Index of the chosen setting in ``candidates``."""
+    rejected: list[tuple[int, int]] = field(default_factory=list)
+    """Runs left out as pauses in motion: their means lie more than ``OFF_SPHERE`` robust
+    standard deviations off the ellipsoid through the others."""
 
     @property
     def n_intervals(self) -> int:
@@ -223,6 +233,14 @@ class StaticReport:
         if self.kind == "pose_table":
             return out
         out.append(self.summary(sample_rate))
+        if self.rejected:
+            out.append(
+                f"static detection left out {len(self.rejected)} quiet stretches whose means lie "
+                f"more than {OFF_SPHERE:g} robust standard deviations off the ellipsoid through "
+                "the others (pauses inside a motion, not poses): samples "
+                + ", ".join(f"{a}-{b}" for a, b in self.rejected[:10])
+                + (" ..." if len(self.rejected) > 10 else "")
+            )
         if len(self.candidates) > 1:
             out.append(
                 "static detection candidates (window: factor:distinct poses): "
@@ -263,6 +281,7 @@ class StaticReport:
             "n_intervals": self.n_intervals,
             "intervals": [[iv.start, iv.stop] for iv in self.intervals],
             "chosen": self.chosen,
+            "rejected": [list(r) for r in self.rejected],
             "candidates": [c.to_dict() for c in self.candidates],
         }
 
@@ -271,28 +290,36 @@ class StaticReport:
 # building blocks
 
 
-def _cumsums(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean of x, and cumulative sums of the centred data and of its square, each (N+1, 3)."""
-    mu = x.mean(axis=0)
-    xc = x - mu
-    c1 = np.zeros((len(x) + 1, 3))
-    c2 = np.zeros((len(x) + 1, 3))
+def _cumsums(
+    x: np.ndarray, valid: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Mean of the valid rows of x, and cumulative sums over valid rows of the centred data,
+    of its square (each (N+1, 3)) and of the valid count (N+1,)."""
+    n = len(x)
+    valid = np.ones(n, bool) if valid is None else valid
+    mu = x[valid].mean(axis=0) if valid.any() else np.zeros(3)
+    xc = np.where(valid[:, None], x - mu, 0.0)
+    c1 = np.zeros((n + 1, 3))
+    c2 = np.zeros((n + 1, 3))
+    cn = np.zeros(n + 1)
     np.cumsum(xc, axis=0, out=c1[1:])
     np.cumsum(xc * xc, axis=0, out=c2[1:])
-    return mu, c1, c2
+    np.cumsum(valid, out=cn[1:])
+    return mu, c1, c2, cn
 
 
-def _moving_variance(c1: np.ndarray, c2: np.ndarray, window: int) -> np.ndarray:
+def _moving_variance(c1: np.ndarray, c2: np.ndarray, cn: np.ndarray, window: int) -> np.ndarray:
+    """Summed per-axis variance of the valid samples in a centred window (inf with < 2)."""
     n = len(c1) - 1
     half = window // 2
     idx = np.arange(n)
     lo = np.clip(idx - half, 0, n)
     hi = np.clip(idx + half + 1, 0, n)
-    cnt = (hi - lo)[:, None]
-    s1 = c1[hi] - c1[lo]
-    s2 = c2[hi] - c2[lo]
-    var = np.maximum(s2 / cnt - (s1 / cnt) ** 2, 0.0)
-    return var.sum(axis=1)
+    cnt = (cn[hi] - cn[lo])[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s1 = (c1[hi] - c1[lo]) / cnt
+        var = np.maximum((c2[hi] - c2[lo]) / cnt - s1**2, 0.0).sum(axis=1)
+    return np.where(cnt[:, 0] >= 2, var, np.inf)
 
 
 def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
@@ -301,11 +328,12 @@ def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
     Edges use the part of the window inside the log. Computed with cumulative sums of the
     mean-removed data (O(N), numerically safe for raw counts near 32768).
     """
-    _, c1, c2 = _cumsums(np.asarray(x, float))
-    return _moving_variance(c1, c2, window)
+    _, c1, c2, cn = _cumsums(np.asarray(x, float))
+    return _moving_variance(c1, c2, cn, window)
 
 
 def _noise_level(mv: np.ndarray) -> float:
+    mv = mv[np.isfinite(mv)]
     if mv.size == 0:
         return float("nan")
     noise = float(np.percentile(mv, 10))
@@ -321,12 +349,20 @@ def _runs(still: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _trimmed(
-    starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int
-) -> tuple[np.ndarray, np.ndarray]:
-    keep = stops - starts >= min_run
-    a, b = starts[keep], stops[keep]
-    t = np.minimum(trim, (b - a) // 4)
-    return a + t, b - t
+    starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Keep runs of at least ``min_run`` samples and trim ``trim`` from each end (at most a
+    quarter of the run). An end where the run stops at an invalid sample (a NaN row inside a
+    pose) is not a motion edge: it is not trimmed, and such a run needs half the length.
+    Returns the kept [a, b) and how many of them continue a run cut by an invalid sample."""
+    n = len(valid)
+    left_bad = (starts > 0) & ~valid[np.maximum(starts - 1, 0)]
+    right_bad = (stops < n) & ~valid[np.minimum(stops, n - 1)]
+    need = np.where(left_bad | right_bad, max(1, min_run // 2), min_run)
+    a = starts + np.where(left_bad, 0, trim)
+    b = stops - np.where(right_bad, 0, trim)
+    keep = (stops - starts >= need) & (b - a >= max(2, min_run // 4))
+    return a[keep], b[keep], int(np.sum(left_bad[keep]))
 
 
 def _fibonacci_sphere(n: int = 412) -> np.ndarray:
@@ -341,39 +377,77 @@ def _fibonacci_sphere(n: int = 412) -> np.ndarray:
 _CELLS = _fibonacci_sphere()
 
 
-def ellipsoid_score(means: np.ndarray) -> tuple[float, int]:
-    """(rms_dof, n_poses) of an algebraic ellipsoid fit to interval means (module docstring).
-
-    rms_dof is NaN when the fit is not possible (fewer than 10 means, or no ellipsoid).
-    """
-    m = np.asarray(means, float)
-    n = len(m)
-    if n <= N_PARAMS:
-        return float("nan"), 0
-    m0 = m.mean(axis=0)
-    s = float(np.sqrt(np.mean(np.sum((m - m0) ** 2, axis=1))))
-    if not np.isfinite(s) or s <= 0:
-        return float("nan"), 0
-    u = (m - m0) / s
+def _ellipsoid_residuals(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Radial residuals of an algebraic ellipsoid fit to u (n, 3), and the centre; None if
+    the fit has no ellipsoid."""
     x, y, z = u.T
     D = np.stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z], 1)
-    v, *_ = np.linalg.lstsq(D, np.ones(n), rcond=None)
+    v, *_ = np.linalg.lstsq(D, np.ones(len(u)), rcond=None)
     A = np.array([[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]])
     try:
         c = -np.linalg.solve(A, v[6:9])
     except np.linalg.LinAlgError:
-        return float("nan"), 0
-    k = 1.0 + c @ A @ c
-    M = A / k
+        return None
+    M = A / (1.0 + c @ A @ c)
     if not np.all(np.isfinite(M)) or np.linalg.eigvalsh(M)[0] <= 0:
-        return float("nan"), 0
+        return None
     d = u - c
     q = np.einsum("ni,ij,nj->n", d, M, d)
-    r = np.sqrt(np.maximum(q, 0.0)) - 1.0
-    rms = float(np.sqrt(np.sum(r * r) / (n - N_PARAMS)))
+    return np.sqrt(np.maximum(q, 0.0)) - 1.0, c
+
+
+def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
+    """(rms_dof, n_poses, off) of an algebraic ellipsoid fit to interval means.
+
+    ``off`` marks means more than ``OFF_SPHERE`` robust standard deviations (1.4826 MAD) off
+    the fitted ellipsoid: quasi-static pauses inside a motion, where the hand's acceleration
+    adds to gravity. The fit is repeated without them, and rms_dof and n_poses are those of
+    the rest. rms_dof is NaN when no fit is possible (fewer than 10 means, or no ellipsoid).
+    """
+    m = np.asarray(means, float)
+    n = len(m)
+    off = np.zeros(n, bool)
+    if n <= N_PARAMS:
+        return float("nan"), 0, off
+    m0 = m.mean(axis=0)
+    s = float(np.sqrt(np.mean(np.sum((m - m0) ** 2, axis=1))))
+    if not np.isfinite(s) or s <= 0:
+        return float("nan"), 0, off
+    u = (m - m0) / s
+    fit = _ellipsoid_residuals(u)
+    if fit is None:
+        return float("nan"), 0, off
+    r, c = fit
+    sigma = 1.4826 * np.median(np.abs(r - np.median(r)))
+    off = np.abs(r - np.median(r)) > OFF_SPHERE * sigma
+    if off.any() and (~off).sum() > N_PARAMS:
+        fit = _ellipsoid_residuals(u[~off])
+        if fit is None:
+            return float("nan"), 0, off
+        r, c = fit
+        u = u[~off]
+    elif off.any():
+        off[:] = False
+    rms = float(np.sqrt(np.sum(r * r) / (len(u) - N_PARAMS)))
+    return rms, _count_directions(u - c), off
+
+
+def _count_directions(d: np.ndarray, min_angle_deg: float = 10.0) -> int:
+    """Distinct directions among the rows of d: greedy cover, each new direction claims all
+    within ``min_angle_deg`` (like :func:`distinct_directions`, vectorised per row). Two
+    means of one pose (a pose split by a noise spike) always count once."""
     dirs = d / np.linalg.norm(d, axis=1, keepdims=True)
-    n_poses = int(np.unique(np.argmax(dirs @ _CELLS.T, axis=1)).size)
-    return rms, n_poses
+    if len(dirs) > 4000:  # cells of a ~10 degree grid: O(n) for very many intervals
+        return int(np.unique(np.argmax(dirs @ _CELLS.T, axis=1)).size)
+    cos = dirs @ dirs.T
+    cos_min = np.cos(np.deg2rad(min_angle_deg))
+    covered = np.zeros(len(dirs), bool)
+    count = 0
+    for i in range(len(dirs)):
+        if not covered[i]:
+            count += 1
+            covered |= cos[i] >= cos_min
+    return count
 
 
 def looks_like_pose_table(x: np.ndarray) -> bool:
@@ -404,7 +478,10 @@ def _window_grid(n: int, sample_rate: float | None) -> list[int]:
 def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     """Index of the best candidate: among those whose score is within ``SCORE_TIE`` of the
     lowest (statistically the same fit), the most distinct poses, then the fewest intervals
-    (fewest split poses), then the most static samples."""
+    (fewest poses split by the detector; a NaN row splitting a run does not count), then the
+    strictest threshold factor (the least room for motion to leak in), then the lowest score.
+    (Not the most static samples: that would favour the loosest threshold, which lets the quiet
+    ends of motions in.)"""
     ok = [i for i, c in enumerate(candidates) if np.isfinite(c.score)]
     if not ok:
         return None
@@ -412,7 +489,12 @@ def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     tied = [i for i in ok if candidates[i].score <= lowest * (1 + SCORE_TIE)]
     return min(
         tied,
-        key=lambda i: (-candidates[i].n_poses, candidates[i].n_intervals, -covered[i]),
+        key=lambda i: (
+            -candidates[i].n_poses,
+            candidates[i].n_intervals - candidates[i].n_cut,
+            candidates[i].factor or 0.0,
+            candidates[i].score,
+        ),
     )
 
 
@@ -537,9 +619,7 @@ def detect_static(
     if pose_table:
         return _pose_table_report(x, valid)
 
-    fill = x[valid].mean(axis=0) if valid.any() else np.zeros(3)
-    xv = np.where(valid[:, None], x, fill)
-    mu, c1, c2 = _cumsums(xv)
+    mu, c1, c2, cn = _cumsums(x, valid)
 
     windows = [int(window)] if window is not None else _window_grid(n, sample_rate)
     if threshold is not None:
@@ -564,8 +644,8 @@ def detect_static(
     def run(w: int, f: float | None, mv: np.ndarray, noise: float):
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
         starts, stops = _runs((mv <= thr) & valid)
-        a, b = _trimmed(starts, stops, min_run_for(w), trim_for(w))
-        return float(thr), a, b
+        a, b, n_cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
+        return float(thr), a, b, n_cut
 
     single = len(windows) * len(factors) == 1
     candidates: list[Candidate] = []
@@ -573,19 +653,22 @@ def detect_static(
     noises: dict[int, float] = {}
     covered: list[int] = []
     for w in windows:
-        mv = _moving_variance(c1, c2, w)
+        mv = _moving_variance(c1, c2, cn, w)
         noise = _noise_level(mv[valid])
         noises[w] = noise
         for f in factors:
-            thr, a, b = run(w, f, mv, noise)
+            thr, a, b, n_cut = run(w, f, mv, noise)
             if single:
                 settings.append((w, f, thr, noise))
                 break
             means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
-            rms, n_poses = ellipsoid_score(means)
-            ok = np.isfinite(rms) and len(a) >= MIN_POSES and n_poses >= MIN_POSES
+            rms, n_poses, off = ellipsoid_score(means)
+            n_kept = int(len(a) - off.sum())
+            ok = np.isfinite(rms) and n_kept >= MIN_POSES and n_poses >= MIN_POSES
             score = rms / np.sqrt(n_poses) if ok else float("inf")
-            candidates.append(Candidate(w, f, thr, len(a), n_poses, rms, float(score)))
+            candidates.append(
+                Candidate(w, f, thr, n_kept, n_poses, rms, float(score), int(off.sum()), n_cut)
+            )
             settings.append((w, f, thr, noise))
             covered.append(int(np.sum(b - a)))
 
@@ -610,11 +693,16 @@ def detect_static(
         w, f = w0, f0
         noise = noises.get(w0)
         if noise is None:
-            noise = _noise_level(_moving_variance(c1, c2, w0)[valid])
+            noise = _noise_level(_moving_variance(c1, c2, cn, w0)[valid])
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
 
-    mv = _moving_variance(c1, c2, w)
-    thr, a, b = run(w, f, mv, noise)
+    mv = _moving_variance(c1, c2, cn, w)
+    thr, a, b, _ = run(w, f, mv, noise)
+    rejected: list[tuple[int, int]] = []
+    if how == "sweep":  # leave out the pauses in motion the score found off the ellipsoid
+        _, _, off = ellipsoid_score((c1[b] - c1[a]) / (b - a)[:, None] + mu)
+        rejected = [(int(s), int(e)) for s, e in zip(a[off], b[off], strict=True)]
+        a, b = a[~off], b[~off]
     intervals = []
     mask = np.zeros(n, bool)
     for s, e in zip(a, b, strict=True):
@@ -636,6 +724,29 @@ def detect_static(
         how=how,
         candidates=candidates,
         chosen=chosen,
+        rejected=rejected,
+    )
+
+
+def detect_rest(
+    x: np.ndarray, *, sample_rate: float | None = None, valid: np.ndarray | None = None
+) -> StaticReport:
+    """Rests of a log with the classic single setting, untrimmed (no sweep).
+
+    For noise floors from the longest rest of a tumble (magnetometer, MARG): the sweep's
+    score needs poses spread over the sphere, and a tumble's slow stretches fit an ellipsoid
+    too. Window 1 s (100 samples without a rate), factor 6, runs of at least one window.
+    """
+    n = len(np.asarray(x))
+    w = int(round(DEFAULT_WINDOW_S * sample_rate)) if sample_rate else DEFAULT_WINDOW_SAMPLES
+    return detect_static(
+        x,
+        window=max(3, min(w, max(3, n // 4))),
+        threshold_factor=DEFAULT_FACTOR,
+        min_samples=max(3, min(w, max(3, n // 4))),
+        trim=0,
+        valid=valid,
+        pose_table=False,
     )
 
 
