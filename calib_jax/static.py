@@ -68,6 +68,10 @@ OFF_SPHERE = 8.0
 # scores closer than this (relative) are statistically the same: the dof-corrected rms of
 # n - 9 residuals scatters by 1 / sqrt(2 (n - 9)), 10 % at n = 60
 SCORE_TIE = 0.1
+# consecutive interval means closer than this fraction of the radius (~6 degrees) are one pose
+# (split by a noise spike, or the settling just after the pose was taken): protocols move
+# further than that from one pose to the next
+SPLIT = 0.1
 # pose tables
 POSE_TABLE_MAX_ROWS = 10_000
 POSE_TABLE_STEP = 0.1
@@ -109,8 +113,12 @@ class Candidate:
     """rms / sqrt(n_poses); lower is better; inf when not scorable."""
     n_off: int = 0
     """Intervals left out as pauses in motion (off the fitted ellipsoid)."""
-    n_cut: int = 0
-    """Intervals that continue a run cut by an invalid sample (not split by the detector)."""
+    n_split: int = 0
+    """Intervals that repeat the pose before them (a pose split by a noise spike; a run cut
+    by an invalid sample does not count)."""
+    n_held: int = 0
+    """Intervals that start a new pose (neither a split nor the rest of a run cut by an
+    invalid sample): the poses found, closer than 10 degrees included."""
 
     def to_dict(self) -> dict:
         return {
@@ -122,6 +130,8 @@ class Candidate:
             "rms": None if not np.isfinite(self.rms) else self.rms,
             "score": None if not np.isfinite(self.score) else self.score,
             "n_off": self.n_off,
+            "n_split": self.n_split,
+            "n_held": self.n_held,
         }
 
 
@@ -201,13 +211,17 @@ class StaticReport:
         )
         if max_rows is not None:
             order = order[:max_rows]
-        lines = [f"  {'window':>6} {'factor':>6} {'intervals':>9} {'poses':>5} {'rms':>9} score"]
+        lines = [
+            f"  {'window':>6} {'factor':>6} {'intervals':>9} {'held':>4} {'split':>5} "
+            f"{'poses':>5} {'rms':>9} score"
+        ]
         for i in order:
             c = self.candidates[i]
             mark = "*" if i == self.chosen else " "
             fac = "-" if c.factor is None else f"{c.factor:g}"
             lines.append(
-                f"{mark} {c.window:>6} {fac:>6} {c.n_intervals:>9} {c.n_poses:>5} "
+                f"{mark} {c.window:>6} {fac:>6} {c.n_intervals:>9} {c.n_held:>4} {c.n_split:>5} "
+                f"{c.n_poses:>5} "
                 f"{c.rms:>9.3g} {c.score:.3g}"
             )
         return "\n".join(lines)
@@ -222,7 +236,7 @@ class StaticReport:
             out.append(
                 f"w={w}: "
                 + " ".join(
-                    f"{'-' if c.factor is None else f'{c.factor:g}'}:{c.n_poses}" for c in row
+                    f"{'-' if c.factor is None else f'{c.factor:g}'}:{c.n_held}" for c in row
                 )
             )
         return "; ".join(out)
@@ -243,7 +257,7 @@ class StaticReport:
             )
         if len(self.candidates) > 1:
             out.append(
-                "static detection candidates (window: factor:distinct poses): "
+                "static detection candidates (window: factor:poses held): "
                 + self.poses_by_candidate()
             )
         return out
@@ -350,11 +364,11 @@ def _runs(still: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _trimmed(
     starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int, valid: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Keep runs of at least ``min_run`` samples and trim ``trim`` from each end (at most a
     quarter of the run). An end where the run stops at an invalid sample (a NaN row inside a
     pose) is not a motion edge: it is not trimmed, and such a run needs half the length.
-    Returns the kept [a, b) and how many of them continue a run cut by an invalid sample."""
+    Returns the kept [a, b) and which of them continue a run cut by an invalid sample."""
     n = len(valid)
     left_bad = (starts > 0) & ~valid[np.maximum(starts - 1, 0)]
     right_bad = (stops < n) & ~valid[np.minimum(stops, n - 1)]
@@ -362,7 +376,7 @@ def _trimmed(
     a = starts + np.where(left_bad, 0, trim)
     b = stops - np.where(right_bad, 0, trim)
     keep = (stops - starts >= need) & (b - a >= max(2, min_run // 4))
-    return a[keep], b[keep], int(np.sum(left_bad[keep]))
+    return a[keep], b[keep], left_bad[keep]
 
 
 def _fibonacci_sphere(n: int = 412) -> np.ndarray:
@@ -475,10 +489,22 @@ def _window_grid(n: int, sample_rate: float | None) -> list[int]:
     return sorted({int(round(w)) for w in np.geomspace(lo, hi, N_WINDOWS)})
 
 
+def _splits(means: np.ndarray, cut: np.ndarray) -> tuple[int, int]:
+    """(held, split): intervals that start a new pose (their mean differs from the previous
+    one by more than ``SPLIT`` of the data's radius, or the run was not cut by an invalid
+    sample), and intervals that repeat the previous pose although the run was not cut by an
+    invalid sample (a pose split by a noise spike)."""
+    if len(means) < 2:
+        return len(means), 0
+    radius = np.median(np.linalg.norm(means - means.mean(axis=0), axis=1))
+    same = np.linalg.norm(np.diff(means, axis=0), axis=1) < SPLIT * radius
+    return int(1 + np.sum(~same & ~cut[1:])), int(np.sum(same & ~cut[1:]))
+
+
 def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     """Index of the best candidate: among those whose score is within ``SCORE_TIE`` of the
-    lowest (statistically the same fit), the most distinct poses, then the fewest intervals
-    (fewest poses split by the detector; a NaN row splitting a run does not count), then the
+    lowest (statistically the same fit), the most poses held (intervals that start a new
+    pose), then the fewest poses split in two by the detector, then the
     strictest threshold factor (the least room for motion to leak in), then the lowest score.
     (Not the most static samples: that would favour the loosest threshold, which lets the quiet
     ends of motions in.)"""
@@ -490,8 +516,8 @@ def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     return min(
         tied,
         key=lambda i: (
-            -candidates[i].n_poses,
-            candidates[i].n_intervals - candidates[i].n_cut,
+            -candidates[i].n_held,
+            candidates[i].n_split,
             candidates[i].factor or 0.0,
             candidates[i].score,
         ),
@@ -644,8 +670,8 @@ def detect_static(
     def run(w: int, f: float | None, mv: np.ndarray, noise: float):
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
         starts, stops = _runs((mv <= thr) & valid)
-        a, b, n_cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
-        return float(thr), a, b, n_cut
+        a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
+        return float(thr), a, b, cut
 
     single = len(windows) * len(factors) == 1
     candidates: list[Candidate] = []
@@ -657,17 +683,20 @@ def detect_static(
         noise = _noise_level(mv[valid])
         noises[w] = noise
         for f in factors:
-            thr, a, b, n_cut = run(w, f, mv, noise)
+            thr, a, b, cut = run(w, f, mv, noise)
             if single:
                 settings.append((w, f, thr, noise))
                 break
             means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
             rms, n_poses, off = ellipsoid_score(means)
+            n_held, n_split = _splits(means, cut)
             n_kept = int(len(a) - off.sum())
             ok = np.isfinite(rms) and n_kept >= MIN_POSES and n_poses >= MIN_POSES
             score = rms / np.sqrt(n_poses) if ok else float("inf")
             candidates.append(
-                Candidate(w, f, thr, n_kept, n_poses, rms, float(score), int(off.sum()), n_cut)
+                Candidate(
+                    w, f, thr, n_kept, n_poses, rms, float(score), int(off.sum()), n_split, n_held
+                )
             )
             settings.append((w, f, thr, noise))
             covered.append(int(np.sum(b - a)))
