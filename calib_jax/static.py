@@ -7,7 +7,7 @@ One setting (window w, threshold factor f): the variance of each axis over a cen
 w samples, summed over the axes, is compared with f times the noise level (the 10th percentile
 of that moving variance: any calibration log spends well over 10 % of its time at rest). Runs of
 static samples at least ``min_samples`` long are kept, and each run loses ``trim`` samples at
-both ends (default half a window, at most a quarter of the run) so that the slow start and end
+both ends (default half a window, at least 0.05 s) so that the slow start and end
 of a hand motion, quiet enough to pass the threshold, do not leak into the interval means.
 
 No one setting suits every log: a 1 s window merges 0.5 s poses into the motion around them, a
@@ -57,6 +57,8 @@ FACTOR_GRID = (1.5, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0, 20.0, 30.0, 50.0, 80.0, 150.0
 # at most 1000 samples)
 N_WINDOWS = 8
 MIN_WINDOW_S = 0.05
+# least trim at each end of a run, with a rate (s)
+MIN_TRIM_S = 0.05
 # shortest run kept by the sweep when the rate is known (s); else one window
 MIN_RUN_S = 0.25
 # scoring
@@ -155,7 +157,7 @@ class StaticReport:
     factor: float | None = None
     """Threshold factor of the chosen setting."""
     trim: int = 0
-    """Samples cut from each end of every run (at most a quarter of the run)."""
+    """Samples cut from each end of every run (runs shorter than the trims and a quarter of ``min_samples`` are dropped)."""
     kind: str = "log"
     """'log' (a time series) or 'pose_table' (one row per pose)."""
     how: str = "given"
@@ -323,17 +325,36 @@ def _cumsums(
 
 
 def _moving_variance(c1: np.ndarray, c2: np.ndarray, cn: np.ndarray, window: int) -> np.ndarray:
-    """Summed per-axis variance of the valid samples in a centred window (inf with < 2)."""
+    """Summed per-axis variance of the valid samples in a centred window (inf with < 2).
+
+    ``c2`` may be per axis (N+1, 3) or already summed over the axes (N+1,). Interior windows
+    are differences of contiguous slices; only the 2 * (window // 2) edge samples index."""
     n = len(c1) - 1
     half = window // 2
-    idx = np.arange(n)
-    lo = np.clip(idx - half, 0, n)
-    hi = np.clip(idx + half + 1, 0, n)
-    cnt = (cn[hi] - cn[lo])[:, None]
+    c2s = c2.sum(axis=1) if c2.ndim == 2 else c2
+    m = min(half, n)
+    k = max(n - half, m)
+    edge_lo = np.concatenate([np.zeros(m, np.int64), np.maximum(np.arange(k, n) - half, 0)])
+    edge_hi = np.concatenate([np.minimum(np.arange(m) + half + 1, n), np.full(n - k, n)])
+    out = np.empty(n)
+    # interior: i in [half, n - half): lo = i - half, hi = i + half + 1
+    if k > m:
+        w = 2 * half + 1
+        s1 = c1[w : n + 1] - c1[0 : n + 1 - w]
+        s2 = c2s[w : n + 1] - c2s[0 : n + 1 - w]
+        cnt = cn[w : n + 1] - cn[0 : n + 1 - w]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            var = s2 / cnt - np.einsum("ij,ij->i", s1, s1) / cnt**2
+        out[m:k] = np.where(cnt >= 2, np.maximum(var, 0.0), np.inf)
+    a, b = edge_lo, edge_hi
+    cnt = cn[b] - cn[a]
+    s1 = c1[b] - c1[a]
     with np.errstate(invalid="ignore", divide="ignore"):
-        s1 = (c1[hi] - c1[lo]) / cnt
-        var = np.maximum((c2[hi] - c2[lo]) / cnt - s1**2, 0.0).sum(axis=1)
-    return np.where(cnt[:, 0] >= 2, var, np.inf)
+        var = (c2s[b] - c2s[a]) / cnt - np.einsum("ij,ij->i", s1, s1) / cnt**2
+    var = np.where(cnt >= 2, np.maximum(var, 0.0), np.inf)
+    out[:m] = var[:m]
+    out[k:] = var[m:]
+    return out
 
 
 def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
@@ -358,8 +379,13 @@ def _noise_level(mv: np.ndarray) -> float:
 
 
 def _runs(still: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    """[start, stop) of the runs of True."""
+    if still.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    edges = np.flatnonzero(still[1:] != still[:-1]) + 1
+    bounds = np.concatenate([[0], edges, [still.size]])
+    first = 0 if still[0] else 1
+    return bounds[first:-1:2], bounds[first + 1 :: 2]
 
 
 def _trimmed(
@@ -615,7 +641,7 @@ def detect_static(
     valid : (N,) bool array, optional
         Samples allowed in intervals (False for non-finite or saturated samples).
     trim : int, optional
-        Samples cut from each end of every run (at most a quarter of the run). Default: half a
+        Samples cut from each end of every run (runs shorter than the trims and a quarter of ``min_samples`` are dropped). Default: half a
         window.
     pose_table : bool, optional
         True: every row is a pose; False: never; default: recognised when there is no sample
@@ -646,6 +672,8 @@ def detect_static(
         return _pose_table_report(x, valid)
 
     mu, c1, c2, cn = _cumsums(x, valid)
+    c2 = c2.sum(axis=1)  # the moving variance needs only the sum over the axes
+    all_valid = bool(valid.all())
 
     windows = [int(window)] if window is not None else _window_grid(n, sample_rate)
     if threshold is not None:
@@ -665,11 +693,15 @@ def detect_static(
         return w
 
     def trim_for(w: int) -> int:
-        return int(trim) if trim is not None else w // 2
+        if trim is not None:
+            return int(trim)
+        # half a window, and with a rate at least MIN_TRIM_S: a short window reacts to the
+        # first samples of a motion only once they have moved more than the noise
+        return max(w // 2, int(round(MIN_TRIM_S * sample_rate)) if sample_rate else 0)
 
     def run(w: int, f: float | None, mv: np.ndarray, noise: float):
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
-        starts, stops = _runs((mv <= thr) & valid)
+        starts, stops = _runs(mv <= thr if all_valid else (mv <= thr) & valid)
         a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
         return float(thr), a, b, cut
 
@@ -689,7 +721,7 @@ def detect_static(
                 break
             means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
             rms, n_poses, off = ellipsoid_score(means)
-            n_held, n_split = _splits(means, cut)
+            n_held, n_split = _splits(means[~off], cut[~off]) if len(a) else (0, 0)
             n_kept = int(len(a) - off.sum())
             ok = np.isfinite(rms) and n_kept >= MIN_POSES and n_poses >= MIN_POSES
             score = rms / np.sqrt(n_poses) if ok else float("inf")

@@ -63,8 +63,8 @@ def test_every_pose_found_without_flags(hold, move, rate, noise, rest):
     assert found == 60 and bad == 0, (found, bad, rep.setting(rate), rep.candidates_table(6))
     assert rep.how == "sweep" and rep.chosen is not None
     assert len(rep.candidates) > 10
-    # the chosen setting's edges are trimmed: every interval ends half a window inside its pose
-    assert rep.trim == rep.window // 2
+    # the chosen setting's edges are trimmed: half a window, at least 0.05 s
+    assert rep.trim == max(rep.window // 2, round(0.05 * rate))
 
 
 def test_without_a_sample_rate_windows_come_from_the_data():
@@ -118,8 +118,9 @@ def test_invalid_explicit_options_are_errors(kw, match):
     x = posed_log(1.0, 0.5, 100.0, 2e-3, poses=12).raw
     with pytest.raises(ValueError, match=match):
         detect_static(x, **kw)
-    with pytest.raises(ValueError, match=match):
-        cj.calibrate_accel(x, **kw)
+    if "trim" not in kw:  # calibrate_accel exposes the detector's options but trim
+        with pytest.raises(ValueError, match=match):
+            cj.calibrate_accel(x, **kw)
 
 
 def test_pose_table_is_fitted_directly(tol):
@@ -127,7 +128,7 @@ def test_pose_table_is_fitted_directly(tol):
     p = random_params(5)
     dirs = random_directions(178, 5)
     alpha = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(55)  # not 5: random_directions(., 5) drew these very normals
     table = dirs @ alpha.T + p[6:9] + 3e-4 * rng.normal(size=(178, 3))
     assert looks_like_pose_table(table)
     rep = detect_static(table)
@@ -150,13 +151,15 @@ def test_pose_table_in_no_known_unit_says_what_it_found():
 
 
 def test_detection_failure_is_not_a_unit_error():
-    """Five poses: the detector finds them all, but five poses cannot fix nine parameters;
-    the error says what the detector found, never that the unit is unknown."""
+    """Five poses cannot fix nine parameters (and give the sweep nothing to score, so the
+    classic 1 s setting is used): the error says what the detector found and tried, never
+    that the unit is unknown."""
     log = posed_log(2.0, 1.0, 100.0, 2e-3, poses=5)
     with pytest.raises(ValueError, match="static detection found") as e:
         cj.calibrate_accel(log.raw, sample_rate=100.0)
-    assert "unit" not in str(e.value)
-    assert "only 5 distinct poses" in str(e.value)
+    msg = str(e.value)
+    assert "unit" not in msg and "distinct poses" in msg
+    assert "of the 96 settings tried, the most distinct poses any found was" in msg
 
 
 @pytest.fixture(scope="module")
@@ -192,10 +195,10 @@ def test_one_second_poses_through_the_diagnosis(one_second_log):
 
 
 def test_a_long_log_is_read_quickly():
-    """Ten million samples: cumulative sums, no per-sample Python (the benchmark times it;
-    here only that the sweep finishes and finds the poses)."""
+    """Two million samples: cumulative sums, no per-sample Python (benchmarks/static_grid.py
+    times ten million; here only that the sweep finishes and finds the poses)."""
     log = posed_log(5.0, 1.0, 1000.0, 2e-3, poses=40)
-    reps = int(np.ceil(10_000_000 / len(log.raw)))
-    x = np.tile(log.raw, (reps, 1))[:10_000_000]
+    reps = int(np.ceil(2_000_000 / len(log.raw)))
+    x = np.tile(log.raw, (reps, 1))[:2_000_000]
     rep = detect_static(x, sample_rate=1000.0)
     assert rep.n_intervals >= 40 * (reps - 1)
