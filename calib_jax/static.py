@@ -41,7 +41,7 @@ moving variance and every interval's mean in O(N).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -74,6 +74,9 @@ SCORE_TIE = 0.1
 # (split by a noise spike, or the settling just after the pose was taken): protocols move
 # further than that from one pose to the next
 SPLIT = 0.1
+# longer logs are swept on every k-th sample (k = ceil(N / this)): the moving variance and
+# the runs cost O(N) per candidate, and two million samples hold any protocol's poses
+MAX_SWEEP_SAMPLES = 2_000_000
 # pose tables
 POSE_TABLE_MAX_ROWS = 10_000
 POSE_TABLE_STEP = 0.1
@@ -166,6 +169,9 @@ class StaticReport:
     candidates: list[Candidate] = field(default_factory=list)
     chosen: int | None = None
     """Index of the chosen setting in ``candidates``."""
+    stride: int = 1
+    """The detector read every ``stride``-th sample (logs longer than MAX_SWEEP_SAMPLES);
+    window, trim and run lengths are given in samples of the full log."""
     rejected: list[tuple[int, int]] = field(default_factory=list)
     """Runs left out as pauses in motion: their means lie more than ``OFF_SPHERE`` robust
     standard deviations off the ellipsoid through the others."""
@@ -198,9 +204,10 @@ class StaticReport:
             ),
             "given": "as given",
         }[self.how]
+        stride = f", on every {self.stride}th sample" if self.stride > 1 else ""
         return (
             f"static detection: {w}, {f}, runs of at least {self.min_samples} samples, "
-            f"{self.trim} samples trimmed from each end ({how})"
+            f"{self.trim} samples trimmed from each end ({how}{stride})"
         )
 
     def candidates_table(self, max_rows: int | None = None) -> str:
@@ -294,6 +301,7 @@ class StaticReport:
             "noise_level": self.noise_level,
             "min_samples": self.min_samples,
             "trim": self.trim,
+            "stride": self.stride,
             "n_intervals": self.n_intervals,
             "intervals": [[iv.start, iv.stop] for iv in self.intervals],
             "chosen": self.chosen,
@@ -660,6 +668,11 @@ def detect_static(
     if min_duration is not None and min_samples is None and not sample_rate:
         raise ValueError("min_duration needs sample_rate; or give min_samples instead")
 
+    if window is None and n > MAX_SWEEP_SAMPLES:
+        return _strided(
+            x, valid, sample_rate, threshold, threshold_factor, min_duration, min_samples, trim
+        )
+
     explicit = window is not None or threshold is not None or threshold_factor is not None
     if pose_table is None:
         pose_table = (
@@ -786,6 +799,44 @@ def detect_static(
         candidates=candidates,
         chosen=chosen,
         rejected=rejected,
+    )
+
+
+def _strided(x, valid, sample_rate, threshold, threshold_factor, min_duration, min_samples, trim):
+    """The sweep on every k-th sample of a very long log (k = ceil(N / MAX_SWEEP_SAMPLES)),
+    a sample kept only when its whole block of k is valid; the intervals found are mapped back
+    to the full log and their means and scatter taken from every sample."""
+    n = len(x)
+    k = int(np.ceil(n / MAX_SWEEP_SAMPLES))
+    m = n // k
+    vb = valid[: m * k].reshape(m, k).all(axis=1)
+    sub = detect_static(
+        x[: m * k : k],
+        sample_rate=sample_rate / k if sample_rate else None,
+        threshold=threshold,
+        threshold_factor=threshold_factor,
+        min_duration=min_duration,
+        min_samples=None if min_samples is None else max(1, int(min_samples) // k),
+        valid=vb,
+        trim=None if trim is None else int(trim) // k,
+        pose_table=False,
+    )
+    intervals = []
+    mask = np.zeros(n, bool)
+    for iv in sub.intervals:
+        a, b = iv.start * k, iv.stop * k
+        seg = x[a:b]
+        intervals.append(StaticInterval(a, b, seg.mean(0), seg.std(0, ddof=1)))
+        mask[a:b] = True
+    return replace(
+        sub,
+        intervals=intervals,
+        mask=mask,
+        window=sub.window * k,
+        min_samples=sub.min_samples * k,
+        trim=sub.trim * k,
+        rejected=[(a * k, b * k) for a, b in sub.rejected],
+        stride=k,
     )
 
 
