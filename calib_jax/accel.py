@@ -228,6 +228,14 @@ def _coverage(pts: np.ndarray, dirs: np.ndarray) -> tuple[float, np.ndarray, flo
     return flat, evecs[:, 0], float(np.min(dirs @ axis)), axis
 
 
+def _check_plane(flatness: float, normal: np.ndarray) -> None:
+    if flatness < 1e-3:
+        raise ValueError(
+            f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
+            "gain and bias along that normal are unobservable. Add poses tilted out of the plane"
+        )
+
+
 def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:+.2f}" for x in v) + "]"
 
@@ -361,6 +369,8 @@ def calibrate_accel(
         c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
     n_distinct = distinct_directions(pts, c_s)
     n_free = int(sum(MODELS[model]))
+    if len(means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
+        _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
     if n_distinct < n_free:
         hint = (
             " With six faces (the Ferraris protocol) fit the six-parameter model instead "
@@ -405,11 +415,7 @@ def calibrate_accel(
     # coverage: plane and hemisphere
     dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
     flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
-    if flatness < 1e-3:
-        raise ValueError(
-            f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
-            "gain and bias along that normal are unobservable. Add poses tilted out of the plane"
-        )
+    _check_plane(flatness, normal)
     if min_cos > -0.05:
         warn.append(
             f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
