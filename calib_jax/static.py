@@ -653,7 +653,8 @@ def detect_static(
         window.
     pose_table : bool, optional
         True: every row is a pose; False: never; default: recognised when there is no sample
-        rate, no explicit setting, few rows and neighbouring rows far apart.
+        rate, no explicit window, threshold or minimum length, few rows and neighbouring rows
+        far apart.
 
     Raises
     ------
@@ -673,7 +674,9 @@ def detect_static(
             x, valid, sample_rate, threshold, threshold_factor, min_duration, min_samples, trim
         )
 
-    explicit = window is not None or threshold is not None or threshold_factor is not None
+    # a window or a fixed threshold says the rows are a time series; a factor alone does not
+    # (the CLI passes one by default)
+    explicit = window is not None or threshold is not None
     if pose_table is None:
         pose_table = (
             not sample_rate

@@ -140,8 +140,24 @@ def test_pose_table_is_fitted_directly(tol):
     assert np.all(np.abs(z) < tol.N_SIGMA), z
     # a time series is never a pose table (neighbouring samples sit at the noise level)
     assert not looks_like_pose_table(posed_log(1.0, 1.0, 100.0, 2e-3, poses=20).raw)
-    # and a table with a sample rate, or explicit settings, is read as a time series
+    # a table with a sample rate, or an explicit window, is read as a time series; a factor
+    # alone (the CLI passes one) does not say so
     assert detect_static(table, sample_rate=100.0).kind == "log"
+    assert detect_static(table, window=5).kind == "log"
+    assert detect_static(table, threshold_factor=6.0).kind == "pose_table"
+
+
+def test_pose_table_through_the_cli(tmp_path, capsys):
+    from calib_jax.cli import main
+
+    rng = np.random.default_rng(7)
+    p = random_params(7)
+    alpha = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
+    table = random_directions(178, 7) @ alpha.T + p[6:9] + 3e-4 * rng.normal(size=(178, 3))
+    path = tmp_path / "table.csv"
+    np.savetxt(path, table, delimiter=",")
+    assert main(["accel", str(path), "--columns", "ax,ay,az"]) == 0
+    assert "pose table: 178 rows, each row taken as one pose" in capsys.readouterr().out
 
 
 def test_pose_table_in_no_known_unit_says_what_it_found():
