@@ -537,24 +537,26 @@ def _splits(means: np.ndarray, cut: np.ndarray) -> tuple[int, int]:
 
 def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     """Index of the best candidate: among those whose score is within ``SCORE_TIE`` of the
-    lowest (statistically the same fit), the most poses held (intervals that start a new
-    pose), then the fewest poses split in two by the detector, then the
-    strictest threshold factor (the least room for motion to leak in), then the lowest score.
-    (Not the most static samples: that would favour the loosest threshold, which lets the quiet
-    ends of motions in.)"""
+    lowest (statistically the same fit), those with the most poses held (intervals that start
+    a new pose) and then the fewest poses split in two by the detector; among these, the one
+    with the median threshold factor (lowest score among equal factors). The strictest factor
+    cuts intervals short at noise spikes; the loosest lets the quiet ends of motions reach
+    past the trim; the middle of the plateau is the setting least sensitive to either."""
     ok = [i for i, c in enumerate(candidates) if np.isfinite(c.score)]
     if not ok:
         return None
     lowest = min(candidates[i].score for i in ok)
     tied = [i for i in ok if candidates[i].score <= lowest * (1 + SCORE_TIE)]
+    top = min((-candidates[i].n_held, candidates[i].n_split) for i in tied)
+    plateau = sorted(
+        (i for i in tied if (-candidates[i].n_held, candidates[i].n_split) == top),
+        key=lambda i: (candidates[i].factor or 0.0, candidates[i].score),
+    )
+    factors = sorted({candidates[i].factor or 0.0 for i in plateau})
+    mid = factors[(len(factors) - 1) // 2]
     return min(
-        tied,
-        key=lambda i: (
-            -candidates[i].n_held,
-            candidates[i].n_split,
-            candidates[i].factor or 0.0,
-            candidates[i].score,
-        ),
+        (i for i in plateau if (candidates[i].factor or 0.0) == mid),
+        key=lambda i: candidates[i].score,
     )
 
 
