@@ -536,8 +536,9 @@ def _splits(means: np.ndarray, cut: np.ndarray) -> tuple[int, int]:
 
 
 def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
-    """Index of the best candidate: among those whose score is within ``SCORE_TIE`` of the
-    lowest (statistically the same fit), those with the most poses held (intervals that start
+    """Index of the best candidate: among those whose score is within ``SCORE_TIE``, or two
+    standard deviations (1.5) of the lowest score's own scatter if more (statistically the same
+    fit; a candidate with few intervals can score low by chance), those with the most poses held (intervals that start
     a new pose) and then the fewest poses split in two by the detector; among these, the one
     with the median threshold factor (lowest score among equal factors). The strictest factor
     cuts intervals short at noise spikes; the loosest lets the quiet ends of motions reach
@@ -545,8 +546,11 @@ def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     ok = [i for i, c in enumerate(candidates) if np.isfinite(c.score)]
     if not ok:
         return None
-    lowest = min(candidates[i].score for i in ok)
-    tied = [i for i in ok if candidates[i].score <= lowest * (1 + SCORE_TIE)]
+    best = min(ok, key=lambda i: candidates[i].score)
+    lowest = candidates[best].score
+    # the best score's own scatter: its rms has n - 9 degrees of freedom (2 sigma)
+    tie = max(SCORE_TIE, 1.5 / np.sqrt(2.0 * max(candidates[best].n_intervals - N_PARAMS, 1)))
+    tied = [i for i in ok if candidates[i].score <= lowest * (1 + tie)]
     top = min((-candidates[i].n_held, candidates[i].n_split) for i in tied)
     plateau = sorted(
         (i for i in tied if (-candidates[i].n_held, candidates[i].n_split) == top),
