@@ -163,9 +163,7 @@ def _detection_found(report: StaticReport, sample_rate: float | None) -> str:
     setting = report.setting(sample_rate).removeprefix("static detection: ")
     found = f"found {report.n_intervals} static intervals with {setting}"
     if tried > 1:
-        found += (
-            f"; of the {tried} settings tried, the most distinct poses any found was {most}"
-        )
+        found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
     return found
 
 
@@ -388,9 +386,7 @@ def calibrate_accel(
         )
 
     static_norm = float(np.median(np.linalg.norm(means, axis=1)))
-    fit_norm = r_s if use == "means" else float(
-        np.median(np.linalg.norm(means - c_s, axis=1))
-    )
+    fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
     detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
     if units == "auto":
         if detected is None:

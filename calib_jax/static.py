@@ -20,11 +20,15 @@ count as paper 1's model), with
     score = rms_dof / sqrt(n_poses),   rms_dof = sqrt(sum r_i^2 / (n - 9)),
 
 r_i = sqrt((m_i - c)' M (m_i - c)) - 1 the radial residual of mean i, n the number of intervals
-and n_poses the number of distinct gravity directions among them (10 degrees apart, greedy). The score is a proxy for the standard error of the parameters: it
-falls with every genuine pose found and with longer, quieter intervals; it rises when motion
-leaks into a mean (larger residual), and splitting one pose in two adds intervals but no pose.
-A candidate needs at least 12 intervals and 12 distinct poses (9 parameters and some
-redundancy). When no candidate qualifies (six-face protocols, one long rest, tumbles), the
+and n_poses the number of distinct gravity directions among them (10 degrees apart, greedy).
+The score is a proxy for the standard error of the parameters: it falls with every genuine
+pose found and with longer, quieter intervals; it rises when motion leaks into a mean (larger
+residual), and splitting one pose in two adds intervals but no pose. A candidate needs at
+least 12 intervals and 12 distinct poses (9 parameters and some redundancy). Quiet stretches
+whose means lie far off the ellipsoid through the others (pauses inside a motion, where the
+hand's acceleration adds to gravity) are left out and reported. Ties (scores within their own
+scatter) go to the most poses held, the fewest split, and the median threshold factor (see
+``_choose``). When no candidate qualifies (six-face protocols, one long rest, tumbles), the
 classic setting is kept: a 1 s window (100 samples without a rate), factor 6, runs of at
 least one window.
 
@@ -160,7 +164,7 @@ class StaticReport:
     factor: float | None = None
     """Threshold factor of the chosen setting."""
     trim: int = 0
-    """Samples cut from each end of every run (runs shorter than the trims and a quarter of ``min_samples`` are dropped)."""
+    """Samples cut from each end of every run."""
     kind: str = "log"
     """'log' (a time series) or 'pose_table' (one row per pose)."""
     how: str = "given"
@@ -536,11 +540,13 @@ def _splits(means: np.ndarray, cut: np.ndarray) -> tuple[int, int]:
 
 
 def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
-    """Index of the best candidate: among those whose score is within ``SCORE_TIE``, or two
-    standard deviations (1.5) of the lowest score's own scatter if more (statistically the same
-    fit; a candidate with few intervals can score low by chance), those with the most poses held (intervals that start
-    a new pose) and then the fewest poses split in two by the detector; among these, the one
-    with the median threshold factor (lowest score among equal factors). The strictest factor
+    """Index of the best candidate.
+
+    Tied: scores within ``SCORE_TIE`` of the lowest, or within 1.5 standard deviations of
+    the lowest score's own scatter if that is more (a candidate with few intervals can score
+    low by chance). Among the tied, those with the most poses held (intervals that start a
+    new pose), then the fewest poses split in two by the detector; among these, the one with
+    the median threshold factor (lowest score among equal factors). The strictest factor
     cuts intervals short at noise spikes; the loosest lets the quiet ends of motions reach
     past the trim; the middle of the plateau is the setting least sensitive to either."""
     ok = [i for i, c in enumerate(candidates) if np.isfinite(c.score)]
@@ -570,7 +576,9 @@ def _check_options(window, threshold, threshold_factor, min_duration, min_sample
             f"window={window!r}: the moving-variance window must be a whole number of at least "
             "3 samples; pass a larger --window, or leave it out to let the detector choose"
         )
-    if threshold_factor is not None and not (np.isfinite(threshold_factor) and threshold_factor > 0):
+    if threshold_factor is not None and not (
+        np.isfinite(threshold_factor) and threshold_factor > 0
+    ):
         raise ValueError(
             f"threshold_factor={threshold_factor!r}: it multiplies the noise level and must be "
             "a positive number (6 is the classic value); leave it out to let the detector choose"
@@ -655,7 +663,8 @@ def detect_static(
     valid : (N,) bool array, optional
         Samples allowed in intervals (False for non-finite or saturated samples).
     trim : int, optional
-        Samples cut from each end of every run (runs shorter than the trims and a quarter of ``min_samples`` are dropped). Default: half a
+        Samples cut from each end of every run (a run left shorter than a quarter of
+        ``min_samples`` is dropped). Default: half a
         window.
     pose_table : bool, optional
         True: every row is a pose; False: never; default: recognised when there is no sample
