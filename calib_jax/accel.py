@@ -151,6 +151,22 @@ def _compiled(solver: str, model: str, options: tuple) -> callable:
 # host-side helpers
 
 
+_UNIT_RANGES = "g: 0.3-3, m/s^2: 3-30, counts: above 30"
+
+
+def _detection_found(report: StaticReport, sample_rate: float | None) -> str:
+    """What the detector found, for an error message."""
+    if report.kind == "pose_table":
+        return report.setting(sample_rate)
+    tried = len(report.candidates)
+    most = max((c.n_poses for c in report.candidates), default=0)
+    setting = report.setting(sample_rate).removeprefix("static detection: ")
+    found = f"found {report.n_intervals} static intervals with {setting}"
+    if tried > 1:
+        found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
+    return found
+
+
 def _units_from_norm(norm: float) -> str | None:
     if 0.3 <= norm <= 3.0:
         return "g"
@@ -210,6 +226,14 @@ def _coverage(pts: np.ndarray, dirs: np.ndarray) -> tuple[float, np.ndarray, flo
     return flat, evecs[:, 0], float(np.min(dirs @ axis)), axis
 
 
+def _check_plane(flatness: float, normal: np.ndarray) -> None:
+    if flatness < 1e-3:
+        raise ValueError(
+            f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
+            "gain and bias along that normal are unobservable. Add poses tilted out of the plane"
+        )
+
+
 def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:+.2f}" for x in v) + "]"
 
@@ -230,7 +254,7 @@ def calibrate_accel(
     sample_rate: float | None = None,
     window: int | None = None,
     threshold: float | None = None,
-    threshold_factor: float = 6.0,
+    threshold_factor: float | None = None,
     min_duration: float | None = None,
     min_samples: int | None = None,
     solver_options: dict | None = None,
@@ -260,7 +284,10 @@ def calibrate_accel(
         Fit the static-interval means (each pose weighs the same; default) or every static
         sample (paper 1's choice; long rests weigh more).
     sample_rate, window, threshold, threshold_factor, min_duration, min_samples
-        Static detection, see :func:`calib_jax.static.detect_static`.
+        Static detection, see :func:`calib_jax.static.detect_static`. Left out, the detector
+        chooses its window and threshold from the data (a sweep scored by a fit of the interval
+        means) and recognises pose tables (one row per pose); what it chose is reported in
+        ``warnings`` (lines starting "static detection").
     solver_options : dict, optional
         Passed to the solver (e.g. ``{"jacobian": "broyden", "rho_form": "paper"}``).
 
@@ -322,45 +349,26 @@ def calibrate_accel(
         min_samples=min_samples,
         valid=valid,
     )
+    warn += report.notes(sample_rate)
     if report.n_intervals == 0:
         raise ValueError(
-            "no static interval found: hold each pose still for at least "
-            f"{report.min_samples} samples, or loosen the detector (--threshold-factor, "
-            "--min-static, --window)"
+            "static detection found no static interval: "
+            + _detection_found(report, sample_rate)
+            + "; hold each pose still for at least half a second, or set the detector "
+            "(--window, --threshold-factor, --min-static)"
         )
     means = report.means()
     pts = means if use == "means" else x[report.mask]
 
-    # units
+    # coverage of the detected poses (a detection failure, reported as such), then units
     c_s, r_s = sphere_fit(jnp.asarray(pts), jnp.ones(len(pts)))
     c_s, r_s = np.asarray(c_s), float(r_s)
-    static_norm = float(np.median(np.linalg.norm(means, axis=1)))
-    detected = _units_from_norm(static_norm)
-    if units == "auto":
-        if detected is None:
-            raise ValueError(
-                f"the static norm is {static_norm:.3g}, which fits no known unit; pass units= "
-                "(--units counts|g|m/s^2)"
-            )
-        units = detected
-    elif detected != units:
-        raise ValueError(
-            f"units={units!r}, but the static readings have norm {static_norm:.4g}, which looks "
-            f"like {detected or 'no known unit'}; pass --units {detected or 'counts'} (or fix "
-            "the scaling of the log)"
-        )
-    if g is None:
-        g = G_STANDARD if units == "m/s^2" else 1.0
-    if g <= 0 or not np.isfinite(g):
-        raise ValueError(f"g must be a positive number, got {g}")
-    out_units = output_units or ("g" if units == "counts" else units)
-
-    # coverage
     if not np.isfinite(r_s) or r_s <= 0:
         c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
-    dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
     n_distinct = distinct_directions(pts, c_s)
     n_free = int(sum(MODELS[model]))
+    if len(means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
+        _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
     if n_distinct < n_free:
         hint = (
             " With six faces (the Ferraris protocol) fit the six-parameter model instead "
@@ -370,17 +378,40 @@ def calibrate_accel(
         )
         raise ValueError(
             f"only {n_distinct} distinct poses (10 degrees apart) among the {len(pts)} fit "
-            f"points; the {n_free}-parameter model needs at least {n_free} spread over the "
-            "sphere (paper 1 uses 48). Record more orientations, or include slow tilting "
-            "motion as quasi-static samples (use='samples' with a short window, e.g. --use "
-            "samples --window 10 --threshold-factor 20)." + hint
+            f"points: static detection {_detection_found(report, sample_rate)}; the "
+            f"{n_free}-parameter model needs at least {n_free} poses spread over the sphere "
+            "(paper 1 uses 48). Record more orientations, hold each still for at least half a "
+            "second, or include slow tilting motion as quasi-static samples (use='samples' "
+            "with a short window, e.g. --use samples --window 10 --threshold-factor 20)." + hint
         )
-    flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
-    if flatness < 1e-3:
+
+    static_norm = float(np.median(np.linalg.norm(means, axis=1)))
+    fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
+    detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
+    if units == "auto":
+        if detected is None:
+            raise ValueError(
+                f"the {report.n_intervals} static means have median norm {static_norm:.4g} "
+                f"(radius {fit_norm:.4g} about their fitted centre), which fits none of the "
+                f"units considered ({_UNIT_RANGES}); pass units= (--units counts|g|m/s^2)"
+            )
+        units = detected
+    elif detected != units:
         raise ValueError(
-            f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
-            "gain and bias along that normal are unobservable. Add poses tilted out of the plane"
+            f"units={units!r}, but the static readings have norm {static_norm:.4g}, which looks "
+            f"like {detected or 'no known unit'} ({_UNIT_RANGES}); pass --units "
+            f"{detected or 'counts'} (or fix the scaling of the log)"
         )
+    if g is None:
+        g = G_STANDARD if units == "m/s^2" else 1.0
+    if g <= 0 or not np.isfinite(g):
+        raise ValueError(f"g must be a positive number, got {g}")
+    out_units = output_units or ("g" if units == "counts" else units)
+
+    # coverage: plane and hemisphere
+    dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
+    flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
+    _check_plane(flatness, normal)
     if min_cos > -0.05:
         warn.append(
             f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
@@ -499,5 +530,7 @@ def interval_errors(
         a = apply_params(params, x[iv.start : iv.stop])
         nrm = np.linalg.norm(a, axis=1)
         errs.append(np.linalg.norm(a.mean(axis=0)) / g - 1.0)
-        floors.append(nrm.std(ddof=1) / np.sqrt(len(nrm)) / g)
-    return float(np.sqrt(np.mean(np.square(errs)))), float(np.sqrt(np.mean(np.square(floors))))
+        if len(nrm) > 1:  # a pose-table row is one sample: no scatter to measure
+            floors.append(nrm.std(ddof=1) / np.sqrt(len(nrm)) / g)
+    floor = float(np.sqrt(np.mean(np.square(floors)))) if floors else float("nan")
+    return float(np.sqrt(np.mean(np.square(errs)))), floor

@@ -107,8 +107,8 @@ def simulate_accel(
     params: np.ndarray,
     directions: np.ndarray | None = None,
     *,
-    samples_per_pose: int = 100,
-    transition_samples: int = 60,
+    samples_per_pose: int | np.ndarray = 100,
+    transition_samples: int | np.ndarray = 60,
     initial_rest: int = 0,
     noise: float = 1e-3,
     hand_motion: float = 0.1,
@@ -125,8 +125,9 @@ def simulate_accel(
         True parameters (paper 1 order), in input units per reference unit.
     directions : (P, 3) array, optional
         Gravity directions of the poses; default :func:`paper48_directions`.
-    samples_per_pose, transition_samples : int
-        Samples held at each pose and spent moving between poses.
+    samples_per_pose, transition_samples : int or (P,) / (P-1,) int arrays
+        Samples held at each pose and spent moving between poses (one number for all, or one
+        per pose / per transition: hand-held protocols hold some poses longer).
     initial_rest : int
         Extra samples at the first pose (a long rest at the start, like imu_tk's logs).
     noise : float
@@ -150,18 +151,20 @@ def simulate_accel(
         ]
     )
     beta = params[6:9]
+    hold = np.broadcast_to(np.asarray(samples_per_pose, int), (len(dirs),))
+    move = np.broadcast_to(np.asarray(transition_samples, int), (max(len(dirs) - 1, 0),))
     acc, pose = [], []
     for i, d in enumerate(dirs):
-        n_hold = samples_per_pose + (initial_rest if i == 0 else 0)
+        n_hold = int(hold[i]) + (initial_rest if i == 0 else 0)
         acc.append(np.repeat(d[None] * g, n_hold, axis=0))
         pose.append(np.full(n_hold, i))
-        if i + 1 < len(dirs) and transition_samples > 0:
-            s = np.linspace(0.0, 1.0, transition_samples + 2)[1:-1]
+        if i + 1 < len(dirs) and move[i] > 0:
+            s = np.linspace(0.0, 1.0, int(move[i]) + 2)[1:-1]
             path = _slerp(d, dirs[i + 1], s) * g
             bump = np.sin(np.pi * s)[:, None] * rng.normal(size=3)[None, :]
             bump *= hand_motion * g / max(np.abs(bump).max(), 1e-12)
             acc.append(path + bump)
-            pose.append(np.full(transition_samples, -1))
+            pose.append(np.full(int(move[i]), -1))
     a = np.concatenate(acc)
     raw = a @ alpha.T + beta + rng.normal(scale=noise, size=a.shape)
     if quantize:

@@ -1,36 +1,103 @@
-"""Static-interval detection by moving variance (paper 1, section 3).
+"""Static-interval detection by moving variance (paper 1, section 3), settings chosen from the data.
 
 "We need to exclude measurements where the sensor is not static ... by observing the temporal
 variance of the data signal. In static position the accelerometer has a low variance."
 
-The detector computes the variance of each axis over a centred moving window, sums the three,
-and calls a sample static when that sum is below a threshold. Runs of static samples shorter
-than a minimum duration are dropped. Host-side numpy: it runs once per log, before any fit.
+One setting (window w, threshold factor f): the variance of each axis over a centred window of
+w samples, summed over the axes, is compared with f times the noise level (the 10th percentile
+of that moving variance: any calibration log spends well over 10 % of its time at rest). Runs of
+static samples at least ``min_samples`` long are kept, and each run loses ``trim`` samples at
+both ends (default half a window, at least 0.05 s) so that the slow start and end
+of a hand motion, quiet enough to pass the threshold, do not leak into the interval means.
 
-Automatic threshold: the 10th percentile of the moving variance is taken as the noise level
-(any calibration log spends well over 10 % of its time at rest) and the threshold is
-``threshold_factor`` (default 6) times that. With a centred window of w samples the variance
-of pure white noise scatters by about sqrt(2/w) of its mean, so 6x the noise level rejects
-motion without cutting static poses at their noisier samples.
+No one setting suits every log: a 1 s window merges 0.5 s poses into the motion around them, a
+5-sample window splits a hand-held pose at its tremor. Like imu_tk (Tedaldi et al. 2014,
+section IV-A), which sweeps the threshold multiplier and keeps the setting whose calibration
+fits best, the detector sweeps a grid of (window, factor) candidates and scores each with a
+cheap host-side fit of its interval means: an algebraic ellipsoid (nine parameters, the same
+count as paper 1's model), with
+
+    score = rms_dof / sqrt(n_poses),   rms_dof = sqrt(sum r_i^2 / (n - 9)),
+
+r_i = sqrt((m_i - c)' M (m_i - c)) - 1 the radial residual of mean i, n the number of intervals
+and n_poses the number of distinct gravity directions among them (10 degrees apart, greedy).
+The score is a proxy for the standard error of the parameters: it falls with every genuine
+pose found and with longer, quieter intervals; it rises when motion leaks into a mean (larger
+residual), and splitting one pose in two adds intervals but no pose. A candidate needs at
+least 12 intervals and 12 distinct poses (9 parameters and some redundancy). Quiet stretches
+whose means lie far off the ellipsoid through the others (pauses inside a motion, where the
+hand's acceleration adds to gravity) are left out and reported. Ties (scores within their own
+scatter) go to the most poses held, the fewest split, and the median threshold factor (see
+``_choose``). When no candidate qualifies (six-face protocols, one long rest, tumbles), the
+classic setting is kept: a 1 s window (100 samples without a rate), factor 6, runs of at
+least one window.
+
+Explicit ``window``, ``threshold_factor``, ``threshold``, ``min_duration`` / ``min_samples``
+and ``trim`` fix their dimension of the sweep; the rest is still chosen.
+
+Pose tables (one row per pose, already averaged, no time column; Magneto's input format) are
+recognised before any of this: neighbouring rows lie far apart compared with the spread of the
+data, and there are few rows. Each row is then one interval of one sample.
+
+Host-side numpy; the log is read once: cumulative sums of the centred data give every window's
+moving variance and every interval's mean in O(N).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+# classic single setting (kept when no sweep candidate can be scored)
+DEFAULT_FACTOR = 6.0
+DEFAULT_WINDOW_S = 1.0
+DEFAULT_WINDOW_SAMPLES = 100
+# threshold multipliers swept (geometric, 1.5 ... 200: at a 3-sample window the 10th
+# percentile of the moving variance at rest is ~0.4 of its mean and its 99.9th ~3.7, so static
+# samples need factors near 10; a long window at rest scatters little and needs ~2)
+FACTOR_GRID = (1.5, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0, 20.0, 30.0, 50.0, 80.0, 150.0)
+# windows swept: geometric from 3 samples (or 0.05 s) to 1 s (or, without a rate, to N/50,
+# at most 1000 samples)
+N_WINDOWS = 8
+MIN_WINDOW_S = 0.05
+# least trim at each end of a run, with a rate (s)
+MIN_TRIM_S = 0.05
+# shortest run kept by the sweep when the rate is known (s); else one window
+MIN_RUN_S = 0.25
+# scoring
+MIN_POSES = 12
+N_PARAMS = 9
+# means further than this many robust standard deviations off the fitted ellipsoid are pauses
+# inside a motion (gravity plus the hand's acceleration), not poses
+OFF_SPHERE = 8.0
+# scores closer than this (relative) are statistically the same: the dof-corrected rms of
+# n - 9 residuals scatters by 1 / sqrt(2 (n - 9)), 10 % at n = 60
+SCORE_TIE = 0.1
+# consecutive interval means closer than this fraction of the radius (~6 degrees) are one pose
+# (split by a noise spike, or the settling just after the pose was taken): protocols move
+# further than that from one pose to the next
+SPLIT = 0.1
+# longer logs are swept on every k-th sample (k = ceil(N / this)): the moving variance and
+# the runs cost O(N) per candidate, and two million samples hold any protocol's poses
+MAX_SWEEP_SAMPLES = 2_000_000
+# pose tables
+POSE_TABLE_MAX_ROWS = 10_000
+POSE_TABLE_STEP = 0.1
+"""Rows are poses when their 25th-percentile neighbour distance exceeds this fraction of the
+data's rms radius (a time series at rest has neighbour distances at the noise level)."""
 
 
 @dataclass(frozen=True)
 class StaticInterval:
-    """One run of static samples, [start, stop) in sample indices of the log."""
+    """One run of static samples, [start, stop) in sample indices of the log (after trimming)."""
 
     start: int
     stop: int
     mean: np.ndarray
     """Mean reading over the interval (3,)."""
     std: np.ndarray
-    """Per-axis standard deviation of the readings (3,)."""
+    """Per-axis standard deviation of the readings (3,); NaN for a one-sample interval."""
 
     @property
     def n(self) -> int:
@@ -38,8 +105,48 @@ class StaticInterval:
 
 
 @dataclass(frozen=True)
+class Candidate:
+    """One detector setting tried by the sweep, and how its interval means fit."""
+
+    window: int
+    factor: float | None
+    """Threshold factor (None when a fixed threshold was given)."""
+    threshold: float
+    n_intervals: int
+    n_poses: int
+    """Distinct gravity directions among the interval means (10 degrees apart)."""
+    rms: float
+    """Dof-corrected radial rms of the algebraic ellipsoid fit to the means (fraction of the
+    radius); NaN when it could not be scored."""
+    score: float
+    """rms / sqrt(n_poses); lower is better; inf when not scorable."""
+    n_off: int = 0
+    """Intervals left out as pauses in motion (off the fitted ellipsoid)."""
+    n_split: int = 0
+    """Intervals that repeat the pose before them (a pose split by a noise spike; a run cut
+    by an invalid sample does not count)."""
+    n_held: int = 0
+    """Intervals that start a new pose (neither a split nor the rest of a run cut by an
+    invalid sample): the poses found, closer than 10 degrees included."""
+
+    def to_dict(self) -> dict:
+        return {
+            "window": self.window,
+            "factor": self.factor,
+            "threshold": self.threshold,
+            "n_intervals": self.n_intervals,
+            "n_poses": self.n_poses,
+            "rms": None if not np.isfinite(self.rms) else self.rms,
+            "score": None if not np.isfinite(self.score) else self.score,
+            "n_off": self.n_off,
+            "n_split": self.n_split,
+            "n_held": self.n_held,
+        }
+
+
+@dataclass(frozen=True)
 class StaticReport:
-    """What the detector found, and the settings that found it."""
+    """What the detector found, the settings that found it, and the candidates it tried."""
 
     intervals: list[StaticInterval]
     mask: np.ndarray
@@ -51,8 +158,27 @@ class StaticReport:
     window: int
     """Moving-window length in samples."""
     min_samples: int
-    """Shortest interval kept, in samples."""
+    """Shortest run kept, in samples (before trimming)."""
     automatic: bool = field(default=True)
+    """True when the threshold came from the noise level (not a fixed ``threshold``)."""
+    factor: float | None = None
+    """Threshold factor of the chosen setting."""
+    trim: int = 0
+    """Samples cut from each end of every run."""
+    kind: str = "log"
+    """'log' (a time series) or 'pose_table' (one row per pose)."""
+    how: str = "given"
+    """'sweep' (chosen by score), 'default' (no candidate scorable: classic setting), 'given'
+    (every setting explicit) or 'pose_table'."""
+    candidates: list[Candidate] = field(default_factory=list)
+    chosen: int | None = None
+    """Index of the chosen setting in ``candidates``."""
+    stride: int = 1
+    """The detector read every ``stride``-th sample (logs longer than MAX_SWEEP_SAMPLES);
+    window, trim and run lengths are given in samples of the full log."""
+    rejected: list[tuple[int, int]] = field(default_factory=list)
+    """Runs left out as pauses in motion: their means lie more than ``OFF_SPHERE`` robust
+    standard deviations off the ellipsoid through the others."""
 
     @property
     def n_intervals(self) -> int:
@@ -62,6 +188,93 @@ class StaticReport:
         """Interval means (n_intervals, 3)."""
         return np.array([iv.mean for iv in self.intervals]).reshape(-1, 3)
 
+    def setting(self, sample_rate: float | None = None) -> str:
+        """The chosen setting in words."""
+        if self.kind == "pose_table":
+            return f"pose table: {len(self.intervals)} rows, each row taken as one pose"
+        w = f"window {self.window} samples"
+        if sample_rate:
+            w += f" ({self.window / sample_rate:.3g} s)"
+        f = (
+            f"threshold {self.factor:g} x noise level {self.noise_level:.3g}"
+            if self.factor is not None
+            else f"threshold {self.threshold:.3g} (given)"
+        )
+        how = {
+            "sweep": f"chosen by fit score from {len(self.candidates)} candidates",
+            "default": (
+                f"classic default: none of {len(self.candidates)} candidates found "
+                f"{MIN_POSES} distinct poses to score"
+            ),
+            "given": "as given",
+        }[self.how]
+        stride = f", on every {self.stride}th sample" if self.stride > 1 else ""
+        return (
+            f"static detection: {w}, {f}, runs of at least {self.min_samples} samples, "
+            f"{self.trim} samples trimmed from each end ({how}{stride})"
+        )
+
+    def candidates_table(self, max_rows: int | None = None) -> str:
+        """The candidates as a text table, best score first (``*`` marks the chosen one)."""
+        if not self.candidates:
+            return ""
+        order = sorted(
+            range(len(self.candidates)),
+            key=lambda i: (not np.isfinite(self.candidates[i].score), self.candidates[i].score),
+        )
+        if max_rows is not None:
+            order = order[:max_rows]
+        lines = [
+            f"  {'window':>6} {'factor':>6} {'intervals':>9} {'held':>4} {'split':>5} "
+            f"{'poses':>5} {'rms':>9} score"
+        ]
+        for i in order:
+            c = self.candidates[i]
+            mark = "*" if i == self.chosen else " "
+            fac = "-" if c.factor is None else f"{c.factor:g}"
+            lines.append(
+                f"{mark} {c.window:>6} {fac:>6} {c.n_intervals:>9} {c.n_held:>4} {c.n_split:>5} "
+                f"{c.n_poses:>5} "
+                f"{c.rms:>9.3g} {c.score:.3g}"
+            )
+        return "\n".join(lines)
+
+    def poses_by_candidate(self) -> str:
+        """One line: poses found by each window at each factor (a compact candidates table)."""
+        if not self.candidates:
+            return ""
+        out = []
+        for w in sorted({c.window for c in self.candidates}):
+            row = [c for c in self.candidates if c.window == w]
+            out.append(
+                f"w={w}: "
+                + " ".join(
+                    f"{'-' if c.factor is None else f'{c.factor:g}'}:{c.n_held}" for c in row
+                )
+            )
+        return "; ".join(out)
+
+    def notes(self, sample_rate: float | None = None) -> list[str]:
+        """What a calibration report should say about detection (setting, found, candidates)."""
+        out = [self.setting(sample_rate)]
+        if self.kind == "pose_table":
+            return out
+        out.append(self.summary(sample_rate))
+        if self.rejected:
+            out.append(
+                f"static detection left out {len(self.rejected)} quiet stretches whose means lie "
+                f"more than {OFF_SPHERE:g} robust standard deviations off the ellipsoid through "
+                "the others (pauses inside a motion, not poses): samples "
+                + ", ".join(f"{a}-{b}" for a, b in self.rejected[:10])
+                + (" ..." if len(self.rejected) > 10 else "")
+            )
+        if len(self.candidates) > 1:
+            out.append(
+                "static detection candidates (window: factor:poses held): "
+                + self.poses_by_candidate()
+            )
+        return out
+
     def summary(self, sample_rate: float | None = None) -> str:
         """A one-paragraph report of the intervals found."""
         lens = np.array([iv.n for iv in self.intervals])
@@ -69,6 +282,8 @@ class StaticReport:
         if sample_rate:
             lens = lens / sample_rate
             unit = "s"
+        if self.kind == "pose_table":
+            return self.setting(sample_rate)
         if len(lens) == 0:
             return "no static intervals"
         how = "automatic" if self.automatic else "given"
@@ -79,6 +294,80 @@ class StaticReport:
             f"{self.threshold:.3g} ({how}), window {self.window} samples"
         )
 
+    def to_dict(self) -> dict:
+        """JSON-ready summary (no per-sample mask)."""
+        return {
+            "kind": self.kind,
+            "how": self.how,
+            "window": self.window,
+            "factor": self.factor,
+            "threshold": self.threshold,
+            "noise_level": self.noise_level,
+            "min_samples": self.min_samples,
+            "trim": self.trim,
+            "stride": self.stride,
+            "n_intervals": self.n_intervals,
+            "intervals": [[iv.start, iv.stop] for iv in self.intervals],
+            "chosen": self.chosen,
+            "rejected": [list(r) for r in self.rejected],
+            "candidates": [c.to_dict() for c in self.candidates],
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# building blocks
+
+
+def _cumsums(
+    x: np.ndarray, valid: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Mean of the valid rows of x, and cumulative sums over valid rows of the centred data,
+    of its square (each (N+1, 3)) and of the valid count (N+1,)."""
+    n = len(x)
+    valid = np.ones(n, bool) if valid is None else valid
+    mu = x[valid].mean(axis=0) if valid.any() else np.zeros(3)
+    xc = np.where(valid[:, None], x - mu, 0.0)
+    c1 = np.zeros((n + 1, 3))
+    c2 = np.zeros((n + 1, 3))
+    cn = np.zeros(n + 1)
+    np.cumsum(xc, axis=0, out=c1[1:])
+    np.cumsum(xc * xc, axis=0, out=c2[1:])
+    np.cumsum(valid, out=cn[1:])
+    return mu, c1, c2, cn
+
+
+def _moving_variance(c1: np.ndarray, c2: np.ndarray, cn: np.ndarray, window: int) -> np.ndarray:
+    """Summed per-axis variance of the valid samples in a centred window (inf with < 2).
+
+    ``c2`` may be per axis (N+1, 3) or already summed over the axes (N+1,). Interior windows
+    are differences of contiguous slices; only the 2 * (window // 2) edge samples index."""
+    n = len(c1) - 1
+    half = window // 2
+    c2s = c2.sum(axis=1) if c2.ndim == 2 else c2
+    m = min(half, n)
+    k = max(n - half, m)
+    edge_lo = np.concatenate([np.zeros(m, np.int64), np.maximum(np.arange(k, n) - half, 0)])
+    edge_hi = np.concatenate([np.minimum(np.arange(m) + half + 1, n), np.full(n - k, n)])
+    out = np.empty(n)
+    # interior: i in [half, n - half): lo = i - half, hi = i + half + 1
+    if k > m:
+        w = 2 * half + 1
+        s1 = c1[w : n + 1] - c1[0 : n + 1 - w]
+        s2 = c2s[w : n + 1] - c2s[0 : n + 1 - w]
+        cnt = cn[w : n + 1] - cn[0 : n + 1 - w]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            var = s2 / cnt - np.einsum("ij,ij->i", s1, s1) / cnt**2
+        out[m:k] = np.where(cnt >= 2, np.maximum(var, 0.0), np.inf)
+    a, b = edge_lo, edge_hi
+    cnt = cn[b] - cn[a]
+    s1 = c1[b] - c1[a]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        var = (c2s[b] - c2s[a]) / cnt - np.einsum("ij,ij->i", s1, s1) / cnt**2
+    var = np.where(cnt >= 2, np.maximum(var, 0.0), np.inf)
+    out[:m] = var[:m]
+    out[k:] = var[m:]
+    return out
+
 
 def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
     """Sum over axes of the per-axis variance in a centred window of ``window`` samples.
@@ -86,20 +375,257 @@ def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
     Edges use the part of the window inside the log. Computed with cumulative sums of the
     mean-removed data (O(N), numerically safe for raw counts near 32768).
     """
+    _, c1, c2, cn = _cumsums(np.asarray(x, float))
+    return _moving_variance(c1, c2, cn, window)
+
+
+def _noise_level(mv: np.ndarray) -> float:
+    mv = mv[np.isfinite(mv)]
+    if mv.size == 0:
+        return float("nan")
+    noise = float(np.percentile(mv, 10))
+    if noise <= 0:  # quantised data resting on one count: use the quiet samples that move
+        pos = mv[mv > 0]
+        noise = float(np.percentile(pos, 10)) if pos.size else 0.0
+    return noise
+
+
+def _runs(still: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """[start, stop) of the runs of True."""
+    if still.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    edges = np.flatnonzero(still[1:] != still[:-1]) + 1
+    bounds = np.concatenate([[0], edges, [still.size]])
+    first = 0 if still[0] else 1
+    return bounds[first:-1:2], bounds[first + 1 :: 2]
+
+
+def _trimmed(
+    starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Keep runs of at least ``min_run`` samples and trim ``trim`` from each end (at most a
+    quarter of the run). An end where the run stops at an invalid sample (a NaN row inside a
+    pose) is not a motion edge: it is not trimmed, and such a run needs half the length.
+    Returns the kept [a, b) and which of them continue a run cut by an invalid sample."""
+    n = len(valid)
+    left_bad = (starts > 0) & ~valid[np.maximum(starts - 1, 0)]
+    right_bad = (stops < n) & ~valid[np.minimum(stops, n - 1)]
+    need = np.where(left_bad | right_bad, max(1, min_run // 2), min_run)
+    a = starts + np.where(left_bad, 0, trim)
+    b = stops - np.where(right_bad, 0, trim)
+    keep = (stops - starts >= need) & (b - a >= max(2, min_run // 4))
+    return a[keep], b[keep], left_bad[keep]
+
+
+def _fibonacci_sphere(n: int = 412) -> np.ndarray:
+    """n nearly uniform unit vectors (spacing ~ sqrt(4 pi / n) rad: 10 degrees for 412)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = np.pi * (1 + 5**0.5) * i
+    r = np.sqrt(1 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+_CELLS = _fibonacci_sphere()
+
+
+def _ellipsoid_residuals(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Radial residuals of an algebraic ellipsoid fit to u (n, 3), and the centre; None if
+    the fit has no ellipsoid."""
+    x, y, z = u.T
+    D = np.stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z], 1)
+    v, *_ = np.linalg.lstsq(D, np.ones(len(u)), rcond=None)
+    A = np.array([[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]])
+    try:
+        c = -np.linalg.solve(A, v[6:9])
+    except np.linalg.LinAlgError:
+        return None
+    M = A / (1.0 + c @ A @ c)
+    if not np.all(np.isfinite(M)) or np.linalg.eigvalsh(M)[0] <= 0:
+        return None
+    d = u - c
+    q = np.einsum("ni,ij,nj->n", d, M, d)
+    return np.sqrt(np.maximum(q, 0.0)) - 1.0, c
+
+
+def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
+    """(rms_dof, n_poses, off) of an algebraic ellipsoid fit to interval means.
+
+    ``off`` marks means more than ``OFF_SPHERE`` robust standard deviations (1.4826 MAD) off
+    the fitted ellipsoid: quasi-static pauses inside a motion, where the hand's acceleration
+    adds to gravity. The fit is repeated without them, and rms_dof and n_poses are those of
+    the rest. rms_dof is NaN when no fit is possible (fewer than 10 means, or no ellipsoid).
+    """
+    m = np.asarray(means, float)
+    n = len(m)
+    off = np.zeros(n, bool)
+    if n <= N_PARAMS:
+        return float("nan"), 0, off
+    m0 = m.mean(axis=0)
+    s = float(np.sqrt(np.mean(np.sum((m - m0) ** 2, axis=1))))
+    if not np.isfinite(s) or s <= 0:
+        return float("nan"), 0, off
+    u = (m - m0) / s
+    fit = _ellipsoid_residuals(u)
+    if fit is None:
+        return float("nan"), 0, off
+    r, c = fit
+    sigma = 1.4826 * np.median(np.abs(r - np.median(r)))
+    off = np.abs(r - np.median(r)) > OFF_SPHERE * sigma
+    if off.any() and (~off).sum() > N_PARAMS:
+        fit = _ellipsoid_residuals(u[~off])
+        if fit is None:
+            return float("nan"), 0, off
+        r, c = fit
+        u = u[~off]
+    elif off.any():
+        off[:] = False
+    rms = float(np.sqrt(np.sum(r * r) / (len(u) - N_PARAMS)))
+    return rms, _count_directions(u - c), off
+
+
+def _count_directions(d: np.ndarray, min_angle_deg: float = 10.0) -> int:
+    """Distinct directions among the rows of d: greedy cover, each new direction claims all
+    within ``min_angle_deg`` (like :func:`distinct_directions`, vectorised per row). Two
+    means of one pose (a pose split by a noise spike) always count once."""
+    dirs = d / np.linalg.norm(d, axis=1, keepdims=True)
+    if len(dirs) > 4000:  # cells of a ~10 degree grid: O(n) for very many intervals
+        return int(np.unique(np.argmax(dirs @ _CELLS.T, axis=1)).size)
+    cos = dirs @ dirs.T
+    cos_min = np.cos(np.deg2rad(min_angle_deg))
+    covered = np.zeros(len(dirs), bool)
+    count = 0
+    for i in range(len(dirs)):
+        if not covered[i]:
+            count += 1
+            covered |= cos[i] >= cos_min
+    return count
+
+
+def looks_like_pose_table(x: np.ndarray) -> bool:
+    """True for few rows that lie far apart from their neighbours (module docstring)."""
     x = np.asarray(x, float)
-    x = x - x.mean(axis=0)
     n = len(x)
-    half = window // 2
-    c1 = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
-    c2 = np.vstack([np.zeros((1, 3)), np.cumsum(x * x, axis=0)])
-    idx = np.arange(n)
-    lo = np.clip(idx - half, 0, n)
-    hi = np.clip(idx + half + 1, 0, n)
-    cnt = (hi - lo)[:, None]
-    s1 = c1[hi] - c1[lo]
-    s2 = c2[hi] - c2[lo]
-    var = np.maximum(s2 / cnt - (s1 / cnt) ** 2, 0.0)
-    return var.sum(axis=1)
+    if n < N_PARAMS + 1 or n > POSE_TABLE_MAX_ROWS:
+        return False
+    spread = float(np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, axis=1))))
+    if not np.isfinite(spread) or spread <= 0:
+        return False
+    step = np.linalg.norm(np.diff(x, axis=0), axis=1)
+    return bool(np.percentile(step, 25) > POSE_TABLE_STEP * spread)
+
+
+def _window_grid(n: int, sample_rate: float | None) -> list[int]:
+    if sample_rate:
+        lo = max(3, int(round(MIN_WINDOW_S * sample_rate)))
+        hi = max(lo, int(round(DEFAULT_WINDOW_S * sample_rate)))
+    else:
+        lo = 3
+        hi = max(lo, min(1000, n // 50))
+    hi = max(3, min(hi, max(3, n // 4)))
+    lo = min(lo, hi)
+    return sorted({int(round(w)) for w in np.geomspace(lo, hi, N_WINDOWS)})
+
+
+def _splits(means: np.ndarray, cut: np.ndarray) -> tuple[int, int]:
+    """(held, split): intervals that start a new pose (their mean differs from the previous
+    one by more than ``SPLIT`` of the data's radius, or the run was not cut by an invalid
+    sample), and intervals that repeat the previous pose although the run was not cut by an
+    invalid sample (a pose split by a noise spike)."""
+    if len(means) < 2:
+        return len(means), 0
+    radius = np.median(np.linalg.norm(means - means.mean(axis=0), axis=1))
+    same = np.linalg.norm(np.diff(means, axis=0), axis=1) < SPLIT * radius
+    return int(1 + np.sum(~same & ~cut[1:])), int(np.sum(same & ~cut[1:]))
+
+
+def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
+    """Index of the best candidate.
+
+    Tied: scores within ``SCORE_TIE`` of the lowest, or within 1.5 standard deviations of
+    the lowest score's own scatter if that is more (a candidate with few intervals can score
+    low by chance). Among the tied, those with the most poses held (intervals that start a
+    new pose), then the fewest poses split in two by the detector; among these, the one with
+    the median threshold factor (lowest score among equal factors). The strictest factor
+    cuts intervals short at noise spikes; the loosest lets the quiet ends of motions reach
+    past the trim; the middle of the plateau is the setting least sensitive to either."""
+    ok = [i for i, c in enumerate(candidates) if np.isfinite(c.score)]
+    if not ok:
+        return None
+    best = min(ok, key=lambda i: candidates[i].score)
+    lowest = candidates[best].score
+    # the best score's own scatter: its rms has n - 9 degrees of freedom (2 sigma)
+    tie = max(SCORE_TIE, 1.5 / np.sqrt(2.0 * max(candidates[best].n_intervals - N_PARAMS, 1)))
+    tied = [i for i in ok if candidates[i].score <= lowest * (1 + tie)]
+    top = min((-candidates[i].n_held, candidates[i].n_split) for i in tied)
+    plateau = sorted(
+        (i for i in tied if (-candidates[i].n_held, candidates[i].n_split) == top),
+        key=lambda i: (candidates[i].factor or 0.0, candidates[i].score),
+    )
+    factors = sorted({candidates[i].factor or 0.0 for i in plateau})
+    mid = factors[(len(factors) - 1) // 2]
+    return min(
+        (i for i in plateau if (candidates[i].factor or 0.0) == mid),
+        key=lambda i: candidates[i].score,
+    )
+
+
+def _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim):
+    if window is not None and (not np.isfinite(window) or int(window) != window or window < 3):
+        raise ValueError(
+            f"window={window!r}: the moving-variance window must be a whole number of at least "
+            "3 samples; pass a larger --window, or leave it out to let the detector choose"
+        )
+    if threshold_factor is not None and not (
+        np.isfinite(threshold_factor) and threshold_factor > 0
+    ):
+        raise ValueError(
+            f"threshold_factor={threshold_factor!r}: it multiplies the noise level and must be "
+            "a positive number (6 is the classic value); leave it out to let the detector choose"
+        )
+    if threshold is not None and not (np.isfinite(threshold) and threshold > 0):
+        raise ValueError(
+            f"threshold={threshold!r}: a fixed threshold on the moving variance must be a "
+            "positive number in input units squared; leave it out for an automatic one"
+        )
+    if min_duration is not None and not (np.isfinite(min_duration) and min_duration >= 0):
+        raise ValueError(
+            f"min_duration={min_duration!r}: the shortest static interval must be zero or more "
+            "seconds; pass a non-negative --min-static, or leave it out"
+        )
+    if min_samples is not None and not (np.isfinite(min_samples) and min_samples >= 0):
+        raise ValueError(
+            f"min_samples={min_samples!r}: the shortest static interval must be zero or more "
+            "samples; pass a non-negative value, or leave it out"
+        )
+    if trim is not None and not (np.isfinite(trim) and trim >= 0):
+        raise ValueError(
+            f"trim={trim!r}: samples cut from each end of an interval must be zero or more; "
+            "leave it out for half a window"
+        )
+
+
+def _pose_table_report(x: np.ndarray, valid: np.ndarray) -> StaticReport:
+    idx = np.flatnonzero(valid)
+    intervals = [
+        StaticInterval(start=int(i), stop=int(i) + 1, mean=x[i].copy(), std=np.full(3, np.nan))
+        for i in idx
+    ]
+    return StaticReport(
+        intervals=intervals,
+        mask=valid.copy(),
+        threshold=float("nan"),
+        noise_level=float("nan"),
+        window=1,
+        min_samples=1,
+        automatic=False,
+        kind="pose_table",
+        how="pose_table",
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the detector
 
 
 def detect_static(
@@ -108,71 +634,249 @@ def detect_static(
     sample_rate: float | None = None,
     window: int | None = None,
     threshold: float | None = None,
-    threshold_factor: float = 6.0,
+    threshold_factor: float | None = None,
     min_duration: float | None = None,
     min_samples: int | None = None,
     valid: np.ndarray | None = None,
+    trim: int | None = None,
+    pose_table: bool | None = None,
 ) -> StaticReport:
-    """Find the static intervals of a log of 3-axis readings.
+    """Find the static intervals of a log of 3-axis readings (module docstring).
 
     Parameters
     ----------
     x : (N, 3) array
         Readings, any unit.
     sample_rate : float, optional
-        Hz. With it, ``window`` defaults to 1 s and ``min_duration`` to 1 s; without it, to
-        100 samples and 100 samples.
+        Hz. Sets the window grid (0.05 s to 1 s) and the shortest run (0.25 s); without it the
+        windows run from 3 samples to N/50 (at most 1000).
+    window : int, optional
+        Moving-window length in samples (at least 3). Default: swept.
     threshold : float, optional
-        Fixed threshold on the summed moving variance (input units squared). Default: automatic
-        (module docstring).
-    threshold_factor : float
-        Multiple of the noise level used by the automatic threshold.
+        Fixed threshold on the summed moving variance (input units squared). Default: a factor
+        times the noise level.
+    threshold_factor : float, optional
+        Multiple of the noise level (positive). Default: swept over ``FACTOR_GRID``.
     min_duration : float, optional
-        Shortest interval kept, in seconds (needs ``sample_rate``); or give ``min_samples``.
+        Shortest run kept, in seconds (needs ``sample_rate``); or give ``min_samples``. Default:
+        one window, and with a rate at least 0.25 s.
     valid : (N,) bool array, optional
         Samples allowed in intervals (False for non-finite or saturated samples).
+    trim : int, optional
+        Samples cut from each end of every run (a run left shorter than a quarter of
+        ``min_samples`` is dropped). Default: half a
+        window.
+    pose_table : bool, optional
+        True: every row is a pose; False: never; default: recognised when there is no sample
+        rate, no explicit window, threshold or minimum length, few rows and neighbouring rows
+        far apart.
+
+    Raises
+    ------
+    ValueError
+        For an invalid explicit option (window < 3, threshold or factor not positive, negative
+        minimum duration or trim), or ``min_duration`` without ``sample_rate``.
     """
+    _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim)
     x = np.asarray(x, float)
     n = len(x)
-    if window is None:
-        window = int(round(sample_rate)) if sample_rate else 100
-    window = max(int(window), 3)
-    if min_samples is None:
-        if min_duration is not None:
-            if not sample_rate:
-                raise ValueError("min_duration needs sample_rate; or give min_samples instead")
-            min_samples = int(round(min_duration * sample_rate))
-        else:
-            min_samples = window
     valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
-    mv = moving_variance(np.where(valid[:, None], x, np.nan_to_num(x[valid].mean(axis=0))), window)
-    usable = mv[valid]
-    noise = float(np.percentile(usable, 10)) if usable.size else float("nan")
-    automatic = threshold is None
-    if automatic:
-        threshold = threshold_factor * noise if noise > 0 else float(np.finfo(float).tiny)
-    still = (mv <= threshold) & valid
-    # runs of True
-    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
-    starts = np.flatnonzero(d == 1)
-    stops = np.flatnonzero(d == -1)
+    if min_duration is not None and min_samples is None and not sample_rate:
+        raise ValueError("min_duration needs sample_rate; or give min_samples instead")
+
+    if window is None and n > MAX_SWEEP_SAMPLES:
+        return _strided(
+            x, valid, sample_rate, threshold, threshold_factor, min_duration, min_samples, trim
+        )
+
+    # a window or a fixed threshold says the rows are a time series; a factor alone does not
+    # (the CLI passes one by default)
+    explicit = window is not None or threshold is not None
+    if pose_table is None:
+        pose_table = (
+            not sample_rate
+            and not explicit
+            and min_samples is None
+            and looks_like_pose_table(x[valid])
+        )
+    if pose_table:
+        return _pose_table_report(x, valid)
+
+    mu, c1, c2, cn = _cumsums(x, valid)
+    c2 = c2.sum(axis=1)  # the moving variance needs only the sum over the axes
+    all_valid = bool(valid.all())
+
+    windows = [int(window)] if window is not None else _window_grid(n, sample_rate)
+    if threshold is not None:
+        factors: list[float | None] = [None]
+    elif threshold_factor is not None:
+        factors = [float(threshold_factor)]
+    else:
+        factors = list(FACTOR_GRID)
+
+    def min_run_for(w: int) -> int:
+        if min_samples is not None:
+            return int(min_samples)
+        if min_duration is not None:
+            return int(round(min_duration * sample_rate))
+        if sample_rate and window is None:
+            return max(w, int(round(MIN_RUN_S * sample_rate)))
+        return w
+
+    def trim_for(w: int) -> int:
+        if trim is not None:
+            return int(trim)
+        # half a window, and with a rate at least MIN_TRIM_S: a short window reacts to the
+        # first samples of a motion only once they have moved more than the noise
+        return max(w // 2, int(round(MIN_TRIM_S * sample_rate)) if sample_rate else 0)
+
+    def run(w: int, f: float | None, mv: np.ndarray, noise: float):
+        thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
+        starts, stops = _runs(mv <= thr if all_valid else (mv <= thr) & valid)
+        a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
+        return float(thr), a, b, cut
+
+    single = len(windows) * len(factors) == 1
+    candidates: list[Candidate] = []
+    settings: list[tuple[int, float | None, float, float]] = []  # (w, f, thr, noise)
+    noises: dict[int, float] = {}
+    covered: list[int] = []
+    for w in windows:
+        mv = _moving_variance(c1, c2, cn, w)
+        noise = _noise_level(mv[valid])
+        noises[w] = noise
+        for f in factors:
+            thr, a, b, cut = run(w, f, mv, noise)
+            if single:
+                settings.append((w, f, thr, noise))
+                break
+            means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
+            rms, n_poses, off = ellipsoid_score(means)
+            n_held, n_split = _splits(means[~off], cut[~off]) if len(a) else (0, 0)
+            n_kept = int(len(a) - off.sum())
+            ok = np.isfinite(rms) and n_kept >= MIN_POSES and n_poses >= MIN_POSES
+            score = rms / np.sqrt(n_poses) if ok else float("inf")
+            candidates.append(
+                Candidate(
+                    w, f, thr, n_kept, n_poses, rms, float(score), int(off.sum()), n_split, n_held
+                )
+            )
+            settings.append((w, f, thr, noise))
+            covered.append(int(np.sum(b - a)))
+
+    best = _choose(candidates, covered)
+
+    if single:
+        how, chosen = "given", None
+        w, f, thr, noise = settings[0]
+    elif best is not None:
+        how, chosen = "sweep", best
+        w, f, thr, noise = settings[best]
+    else:  # nothing scorable: the classic setting (or the closest to it in the grid)
+        how = "default"
+        w0 = window or (
+            int(round(DEFAULT_WINDOW_S * sample_rate)) if sample_rate else DEFAULT_WINDOW_SAMPLES
+        )
+        w0 = max(3, min(w0, max(3, n // 4))) if window is None else w0
+        f0 = None if threshold is not None else (threshold_factor or DEFAULT_FACTOR)
+        chosen = next(
+            (i for i, (ww, ff, _, _) in enumerate(settings) if ww == w0 and ff == f0), None
+        )
+        w, f = w0, f0
+        noise = noises.get(w0)
+        if noise is None:
+            noise = _noise_level(_moving_variance(c1, c2, cn, w0)[valid])
+        thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
+
+    mv = _moving_variance(c1, c2, cn, w)
+    thr, a, b, _ = run(w, f, mv, noise)
+    rejected: list[tuple[int, int]] = []
+    if how == "sweep":  # leave out the pauses in motion the score found off the ellipsoid
+        _, _, off = ellipsoid_score((c1[b] - c1[a]) / (b - a)[:, None] + mu)
+        rejected = [(int(s), int(e)) for s, e in zip(a[off], b[off], strict=True)]
+        a, b = a[~off], b[~off]
     intervals = []
     mask = np.zeros(n, bool)
-    for a, b in zip(starts, stops, strict=True):
-        if b - a >= min_samples:
-            seg = x[a:b]
-            intervals.append(
-                StaticInterval(start=int(a), stop=int(b), mean=seg.mean(0), std=seg.std(0, ddof=1))
-            )
-            mask[a:b] = True
+    for s, e in zip(a, b, strict=True):
+        seg = x[s:e]
+        std = seg.std(0, ddof=1) if e - s > 1 else np.full(3, np.nan)
+        intervals.append(StaticInterval(start=int(s), stop=int(e), mean=seg.mean(0), std=std))
+        mask[s:e] = True
     return StaticReport(
         intervals=intervals,
         mask=mask,
-        threshold=float(threshold),
-        noise_level=noise,
-        window=window,
-        min_samples=int(min_samples),
-        automatic=automatic,
+        threshold=float(thr),
+        noise_level=float(noise),
+        window=int(w),
+        min_samples=int(min_run_for(w)),
+        automatic=threshold is None,
+        factor=f,
+        trim=int(trim_for(w)),
+        kind="log",
+        how=how,
+        candidates=candidates,
+        chosen=chosen,
+        rejected=rejected,
+    )
+
+
+def _strided(x, valid, sample_rate, threshold, threshold_factor, min_duration, min_samples, trim):
+    """The sweep on every k-th sample of a very long log (k = ceil(N / MAX_SWEEP_SAMPLES)),
+    a sample kept only when its whole block of k is valid; the intervals found are mapped back
+    to the full log and their means and scatter taken from every sample."""
+    n = len(x)
+    k = int(np.ceil(n / MAX_SWEEP_SAMPLES))
+    m = n // k
+    vb = valid[: m * k].reshape(m, k).all(axis=1)
+    sub = detect_static(
+        x[: m * k : k],
+        sample_rate=sample_rate / k if sample_rate else None,
+        threshold=threshold,
+        threshold_factor=threshold_factor,
+        min_duration=min_duration,
+        min_samples=None if min_samples is None else max(1, int(min_samples) // k),
+        valid=vb,
+        trim=None if trim is None else int(trim) // k,
+        pose_table=False,
+    )
+    intervals = []
+    mask = np.zeros(n, bool)
+    for iv in sub.intervals:
+        a, b = iv.start * k, iv.stop * k
+        seg = x[a:b]
+        intervals.append(StaticInterval(a, b, seg.mean(0), seg.std(0, ddof=1)))
+        mask[a:b] = True
+    return replace(
+        sub,
+        intervals=intervals,
+        mask=mask,
+        window=sub.window * k,
+        min_samples=sub.min_samples * k,
+        trim=sub.trim * k,
+        rejected=[(a * k, b * k) for a, b in sub.rejected],
+        stride=k,
+    )
+
+
+def detect_rest(
+    x: np.ndarray, *, sample_rate: float | None = None, valid: np.ndarray | None = None
+) -> StaticReport:
+    """Rests of a log with the classic single setting, untrimmed (no sweep).
+
+    For noise floors from the longest rest of a tumble (magnetometer, MARG): the sweep's
+    score needs poses spread over the sphere, and a tumble's slow stretches fit an ellipsoid
+    too. Window 1 s (100 samples without a rate), factor 6, runs of at least one window.
+    """
+    n = len(np.asarray(x))
+    w = int(round(DEFAULT_WINDOW_S * sample_rate)) if sample_rate else DEFAULT_WINDOW_SAMPLES
+    return detect_static(
+        x,
+        window=max(3, min(w, max(3, n // 4))),
+        threshold_factor=DEFAULT_FACTOR,
+        min_samples=max(3, min(w, max(3, n // 4))),
+        trim=0,
+        valid=valid,
+        pose_table=False,
     )
 
 

@@ -38,7 +38,7 @@ from scipy import stats
 
 from ..io.files import SensorLog
 from ..lm import is_converged
-from ..static import detect_static
+from ..static import detect_rest, detect_static
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
 
@@ -869,17 +869,20 @@ def diagnose_accel(
         t = np.arange(n) / (sample_rate or 1.0)
     t = np.asarray(t, float)
     ok = np.all(np.isfinite(x), axis=1)
+    det_notes: list[str] = []
     if intervals is not None:
         spans = [(int(a), int(b)) for a, b in intervals if b - a > 1 and ok[a:b].all()]
     elif block:
         spans = [(a, a + block) for a in range(0, n - block + 1, block)]
         spans = [(a, b) for a, b in spans if ok[a:b].all()]
     else:
+        # the same detector and defaults as calibrate_accel (a sweep scored by the fit)
         rep = detect_static(x, sample_rate=sample_rate, valid=ok, **static_options)
         spans = [(iv.start, iv.stop) for iv in rep.intervals]
+        det_notes = rep.notes(sample_rate)
     m = len(spans)
     if m < MIN_OBSERVATIONS:
-        return _not_possible(
+        d = _not_possible(
             "accel",
             m,
             f"{MIN_OBSERVATIONS} static intervals",
@@ -887,6 +890,8 @@ def diagnose_accel(
             "cannot run",
             source,
         )
+        d.notes.extend(det_notes)
+        return d
     means = np.array([x[a:b].mean(0) for a, b in spans])
     import jax.numpy as jnp
 
@@ -916,6 +921,7 @@ def diagnose_accel(
         sensor="accel",
         kind="static intervals" if not block else f"blocks of {block}",
     )
+    obs.notes.extend(det_notes)
     if temp is None:
         obs.notes.append("no temperature column: temperature effects not tested")
     # floors from the base calibration applied to every sample
@@ -1031,7 +1037,7 @@ def diagnose_mag(
     )
     if temp is None:
         obs.notes.append("no temperature column: temperature effects not tested")
-    rep = detect_static(x, sample_rate=sample_rate, valid=ok)
+    rep = detect_rest(x, sample_rate=sample_rate, valid=ok)
     if rep.intervals:
         iv = max(rep.intervals, key=lambda v: v.n)
         rest = nrm_all[iv.start : iv.stop]

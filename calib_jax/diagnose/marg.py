@@ -29,7 +29,7 @@ import numpy as np
 
 from ..lm import lm_solve
 from ..rotations import describe_permutation, rotvec_to_dcm, signed_permutations
-from ..static import detect_static
+from ..static import detect_rest
 from .floors import allan_deviation
 from .loop import (
     BIC_MIN,
@@ -307,7 +307,7 @@ def diagnose_marg(
     # floors: the angle over the longest rest, with the final model's rotation
     R_fin = np.asarray(rotvec_to_dcm(jnp.asarray(cur["theta"][:3] * free[:3]))) @ P_cur
     Mn = Mn @ R_fin.T
-    rep = detect_static(A, sample_rate=sample_rate, valid=ok)
+    rep = detect_rest(A, sample_rate=sample_rate, valid=ok)
     ang_full = _angles(Afn, Mn)
     if rep.intervals:
         iv = max(rep.intervals, key=lambda v: v.n)

@@ -1,0 +1,220 @@
+"""Static detection without flags (issue 13): simulated logs with known poses, pose tables,
+invalid explicit options, and the 1 s-pose log through calibrate_accel and the diagnosis.
+
+Tolerances: every pose held is found exactly once and no interval reaches into a motion (the
+simulator labels every sample, so this is exact, not statistical); parameters within
+``Tol.N_SIGMA`` standard errors of the truth (conftest: 5 sigma, false alarm ~6e-7 per
+parameter); the grid benchmark (benchmarks/static_grid.py) holds the wider sweep.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import calib_jax as cj
+from calib_jax.simulate import random_directions, random_params, simulate_accel
+from calib_jax.static import detect_static, looks_like_pose_table
+
+from .conftest import Tol
+
+
+def posed_log(hold_s, move_s, rate, noise, rest_s=0.0, poses=60, seed=0, scale=1.0, **kw):
+    return simulate_accel(
+        random_params(seed, scale=scale),
+        random_directions(poses, seed),
+        samples_per_pose=int(round(hold_s * rate)),
+        transition_samples=int(round(move_s * rate)),
+        initial_rest=int(round(rest_s * rate)),
+        noise=noise * scale,
+        sample_rate=rate,
+        rng=seed,
+        **kw,
+    )
+
+
+def poses_found(log, rep) -> tuple[int, int]:
+    """(poses with a clean interval, intervals reaching into a motion or across poses)."""
+    found, bad = set(), 0
+    for iv in rep.intervals:
+        p = log.pose[iv.start : iv.stop]
+        if p[0] >= 0 and np.all(p == p[0]):
+            found.add(int(p[0]))
+        else:
+            bad += 1
+    return len(found), bad
+
+
+@pytest.mark.parametrize(
+    "hold, move, rate, noise, rest",
+    [
+        (0.5, 0.5, 100.0, 2e-3, 0.0),  # shortest poses, quick moves
+        (1.0, 1.5, 100.0, 2e-3, 0.0),  # the issue's log
+        (1.0, 1.0, 20.0, 5e-3, 30.0),  # low rate, long initial rest
+        (2.0, 0.5, 1000.0, 1e-3, 0.0),  # high rate
+    ],
+)
+def test_every_pose_found_without_flags(hold, move, rate, noise, rest):
+    log = posed_log(hold, move, rate, noise, rest)
+    rep = detect_static(log.raw, sample_rate=rate)
+    found, bad = poses_found(log, rep)
+    assert found == 60 and bad == 0, (found, bad, rep.setting(rate), rep.candidates_table(6))
+    assert rep.how == "sweep" and rep.chosen is not None
+    assert len(rep.candidates) > 10
+    # the chosen setting's edges are trimmed: half a window, at least 0.05 s
+    assert rep.trim == max(rep.window // 2, round(0.05 * rate))
+
+
+def test_without_a_sample_rate_windows_come_from_the_data():
+    """The headerless integer log of the issue: 40 poses of 1-3 s, counts, no time column."""
+    rng = np.random.default_rng(3)
+    log = simulate_accel(
+        random_params(3, scale=4096.0),
+        random_directions(40, 3),
+        samples_per_pose=rng.integers(100, 300, 40),
+        transition_samples=rng.integers(100, 200, 39),
+        noise=8.0,
+        quantize=True,
+        rng=3,
+    )
+    rep = detect_static(log.raw)
+    assert poses_found(log, rep) == (40, 0), rep.setting()
+    cal = cj.calibrate_accel(log.raw)
+    assert cal.input_units == "counts" and cal.n_intervals == 40
+    z = (cal.params - log.params) / cal.stderr
+    assert np.all(np.abs(z) < Tol.N_SIGMA), z
+
+
+def test_explicit_settings_override_the_sweep():
+    log = posed_log(1.0, 0.3, 100.0, 2e-3)
+    rep = detect_static(log.raw, sample_rate=100.0, window=25, threshold_factor=6.0)
+    assert rep.how == "given" and rep.candidates == []
+    assert rep.window == 25 and rep.factor == 6.0
+    assert poses_found(log, rep) == (60, 0)
+    # a window alone: the factor is still swept, the window is kept
+    rep = detect_static(log.raw, sample_rate=100.0, window=25)
+    assert rep.how == "sweep" and {c.window for c in rep.candidates} == {25}
+    # a fixed threshold
+    rep = detect_static(log.raw, window=25, threshold=1e-4, trim=0)
+    assert rep.factor is None and rep.threshold == 1e-4 and rep.trim == 0
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(window=2), "window=2"),
+        (dict(window=10.5), "window=10.5"),
+        (dict(threshold_factor=0.0), "threshold_factor=0.0"),
+        (dict(threshold_factor=-3.0), "threshold_factor=-3.0"),
+        (dict(threshold=-1.0), "threshold=-1.0"),
+        (dict(min_duration=-0.5, sample_rate=100.0), "min_duration=-0.5"),
+        (dict(min_samples=-1), "min_samples=-1"),
+        (dict(trim=-2), "trim=-2"),
+    ],
+)
+def test_invalid_explicit_options_are_errors(kw, match):
+    x = posed_log(1.0, 0.5, 100.0, 2e-3, poses=12).raw
+    with pytest.raises(ValueError, match=match):
+        detect_static(x, **kw)
+    if "trim" not in kw:  # calibrate_accel exposes the detector's options but trim
+        with pytest.raises(ValueError, match=match):
+            cj.calibrate_accel(x, **kw)
+
+
+def test_pose_table_is_fitted_directly(tol):
+    """178 rows in g, each one pose (Magneto's input format): no detection, one row one pose."""
+    p = random_params(5)
+    dirs = random_directions(178, 5)
+    alpha = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
+    rng = np.random.default_rng(55)  # not 5: random_directions(., 5) drew these very normals
+    table = dirs @ alpha.T + p[6:9] + 3e-4 * rng.normal(size=(178, 3))
+    assert looks_like_pose_table(table)
+    rep = detect_static(table)
+    assert rep.kind == "pose_table" and rep.n_intervals == 178
+    cal = cj.calibrate_accel(table)
+    assert cal.input_units == "g" and cal.n_intervals == 178
+    assert any("pose table: 178 rows, each row taken as one pose" in w for w in cal.warnings)
+    z = (cal.params - p) / cal.stderr
+    assert np.all(np.abs(z) < tol.N_SIGMA), z
+    # a time series is never a pose table (neighbouring samples sit at the noise level)
+    assert not looks_like_pose_table(posed_log(1.0, 1.0, 100.0, 2e-3, poses=20).raw)
+    # a table with a sample rate, or an explicit window, is read as a time series; a factor
+    # alone (the CLI passes one) does not say so
+    assert detect_static(table, sample_rate=100.0).kind == "log"
+    assert detect_static(table, window=5).kind == "log"
+    assert detect_static(table, threshold_factor=6.0).kind == "pose_table"
+
+
+def test_pose_table_through_the_cli(tmp_path, capsys):
+    from calib_jax.cli import main
+
+    rng = np.random.default_rng(7)
+    p = random_params(7)
+    alpha = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
+    table = random_directions(178, 7) @ alpha.T + p[6:9] + 3e-4 * rng.normal(size=(178, 3))
+    path = tmp_path / "table.csv"
+    np.savetxt(path, table, delimiter=",")
+    assert main(["accel", str(path), "--columns", "ax,ay,az"]) == 0
+    assert "pose table: 178 rows, each row taken as one pose" in capsys.readouterr().out
+
+
+def test_pose_table_in_no_known_unit_says_what_it_found():
+    table = 0.0737 * random_directions(50, 2)  # a scale no unit range holds
+    with pytest.raises(ValueError, match=r"0\.0737.*units considered \(g: 0\.3-3"):
+        cj.calibrate_accel(table)
+
+
+def test_detection_failure_is_not_a_unit_error():
+    """Five poses cannot fix nine parameters (and give the sweep nothing to score, so the
+    classic 1 s setting is used): the error says what the detector found and tried, never
+    that the unit is unknown."""
+    log = posed_log(2.0, 1.0, 100.0, 2e-3, poses=5)
+    with pytest.raises(ValueError, match="static detection found") as e:
+        cj.calibrate_accel(log.raw, sample_rate=100.0)
+    msg = str(e.value)
+    assert "unit" not in msg and "distinct poses" in msg
+    assert "of the 96 settings tried, the most distinct poses any found was" in msg
+
+
+@pytest.fixture(scope="module")
+def one_second_log():
+    # the issue's log: poses held 1 s, 1.5 s of hand motion between them, 100 Hz, 60 poses
+    return posed_log(1.0, 1.5, 100.0, 2e-3)
+
+
+def test_one_second_poses_through_calibrate_accel(one_second_log, tol):
+    log = one_second_log
+    cal = cj.calibrate_accel(log.raw, sample_rate=100.0)
+    assert cal.status == "ok" and cal.n_intervals == 60, cal.report()
+    z = (cal.params - log.params) / cal.stderr
+    assert np.all(np.abs(z) < tol.N_SIGMA), z
+    # at the noise floor: the residual of 60 interval means is the floor within its own
+    # chi-square scatter (51 degrees of freedom: +-20 % at 2 sigma) and the fit's dof loss
+    assert cal.rms_after < 1.3 * cal.noise_floor
+    text = cal.report()
+    assert "static detection: window" in text and "chosen by fit score" in text
+    assert "static detection candidates" in text
+    d = json.loads(json.dumps(cal.to_dict()))
+    assert any(w.startswith("static detection: window") for w in d["warnings"])
+
+
+def test_one_second_poses_through_the_diagnosis(one_second_log):
+    from calib_jax.diagnose import diagnose_accel
+
+    log = one_second_log
+    d = diagnose_accel(log.raw, sample_rate=100.0)
+    assert d.verdict != "not_possible", d.notes
+    assert d.n_observations == 60
+    assert any(n.startswith("static detection: window") for n in d.notes)
+
+
+def test_a_long_log_is_read_quickly():
+    """Two million samples: cumulative sums, no per-sample Python (benchmarks/static_grid.py
+    times ten million; here only that the sweep finishes and finds the poses)."""
+    log = posed_log(5.0, 1.0, 1000.0, 2e-3, poses=40)
+    reps = int(np.ceil(2_000_000 / len(log.raw)))
+    x = np.tile(log.raw, (reps, 1))[:2_000_000]
+    rep = detect_static(x, sample_rate=1000.0)
+    assert rep.n_intervals >= 40 * (reps - 1)
