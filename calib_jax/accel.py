@@ -365,7 +365,12 @@ def calibrate_accel(
     c_s, r_s = np.asarray(c_s), float(r_s)
     if not np.isfinite(r_s) or r_s <= 0:
         c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
-    n_distinct = distinct_directions(pts, c_s)
+    # counted about the fitted centre and about the nominal one (zero, or mid-range for
+    # unsigned counts): points of a single pose fit no sphere, and about their own arbitrary
+    # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
+    static_norm = float(np.median(np.linalg.norm(means, axis=1)))
+    nominal_centre = _nominal(pts, _units_from_norm(static_norm) or "counts", 1.0)[0]
+    n_distinct = min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
     n_free = int(sum(MODELS[model]))
     if len(means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
         _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
@@ -385,7 +390,6 @@ def calibrate_accel(
             "with a short window, e.g. --use samples --window 10 --threshold-factor 20)." + hint
         )
 
-    static_norm = float(np.median(np.linalg.norm(means, axis=1)))
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
     detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
     if units == "auto":
@@ -404,6 +408,15 @@ def calibrate_accel(
         )
     if g is None:
         g = G_STANDARD if units == "m/s^2" else 1.0
+    elif output_units is None:
+        # a g off the data's unit (m/s^2 data with g = 1) silently rescales the output; with
+        # output_units given the conversion is the user's stated intent
+        from .batch import check_reference_magnitude
+
+        try:
+            check_reference_magnitude(g, units, static_norm)
+        except ValueError as exc:
+            raise ValueError(f"{exc}; or give the output unit (--out-units) to convert") from None
     if g <= 0 or not np.isfinite(g):
         raise ValueError(f"g must be a positive number, got {g}")
     out_units = output_units or ("g" if units == "counts" else units)

@@ -212,3 +212,23 @@ def test_float32_warns():
         assert any("float32" in str(r.message) for r in rec)
     finally:
         jax.config.update("jax_enable_x64", True)
+
+
+def test_a_board_that_never_moved_is_one_pose(tmp_path):
+    """A flat board quantised to 0.01 g (the Arduino-MARG raw_data log): about the centre of a
+    sphere fit through one cluster the noise looked like 5 distinct poses; counted about the
+    nominal centre (zero for g) it is the one pose it is, and the error says so."""
+    rng = np.random.default_rng(0)
+    x = np.round(np.array([0.02, -0.01, 1.0]) + 0.01 * rng.normal(size=(1600, 3)), 2)
+    with pytest.raises(ValueError, match="only 1 distinct poses"):
+        cj.calibrate_accel(x)
+
+
+def test_g_that_contradicts_the_unit_is_an_error(sim48):
+    """m/s^2 data with g = 1 used to calibrate to |a| = 1 with gains of 9.8 and status ok; it
+    is an error unless the output unit is given (then the conversion is intended)."""
+    raw = sim48.raw * 9.80665
+    with pytest.raises(ValueError, match="does not match the data's unit"):
+        cj.calibrate_accel(raw, g=1.0)
+    cal = cj.calibrate_accel(raw, g=1.0, output_units="g")
+    assert cal.success and abs(cal.params[0] / 9.80665 - cj.calibrate_accel(sim48.raw).params[0]) < 1e-6

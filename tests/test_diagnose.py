@@ -140,6 +140,21 @@ def test_too_few_poses_is_its_own_verdict():
     assert d.to_dict()["steps"] == []
 
 
+def test_one_sample_per_observation_has_no_floor_and_no_verdict(tmp_path):
+    """A pose table (here the Xsens interval means written one per row) or --block 1 leaves
+    nothing to measure a noise floor with; the diagnosis said at_floor / effects_added against
+    a NaN floor. It must be not_possible, and the CLI exit 2 naming the reason."""
+    log = load_log(demo_log_path())
+    d = diagnose_accel(log, block=1)
+    assert d.verdict == "not_possible" and "noise floor cannot be measured" in d.notes[0]
+    from calib_jax.static import detect_static
+
+    means = detect_static(log.acc, sample_rate=log.sample_rate).means()
+    table = tmp_path / "poses.txt"
+    np.savetxt(table, means)
+    assert main(["diagnose", str(table)]) == 2
+
+
 # ----------------------------------------------------------------------------- real logs
 
 

@@ -944,6 +944,21 @@ def diagnose_accel(
         )
         L = (b - a) // 2
     allan = allan_deviation(rest, L)
+    if not np.any(np.isfinite([white, allan])):
+        # one sample per observation (a pose table, --block 1): no floor to judge effects by;
+        # a verdict against a NaN floor would be a guess
+        d = _not_possible(
+            "accel",
+            m,
+            "observations of several samples each",
+            f"the {m} observations have {int(np.median([b - a for a, b in spans]))} sample(s) "
+            "each (a pose table, or --block 1): the noise floor cannot be measured, so no "
+            "effect can be judged against it; diagnose the recording itself (its static "
+            "intervals, or --block with the samples per pose)",
+            source,
+        )
+        d.notes.extend(obs.notes)
+        return d
     floor = float(np.nanmax([white, allan]))
     res = _run(obs, cands, floor, seed, degree)
     return _finish(obs, res, (white, allan), "mg", source, 1e3)
