@@ -605,9 +605,7 @@ def test_any_bytes_load_or_raise_valueerror(tmp_path, raw, suffix):
     assert len(log) > 0
 
 
-@pytest.mark.parametrize(
-    ("scale", "unit"), [(1.0, None), (1e3, "ms"), (1e6, "us"), (1e9, "ns")]
-)
+@pytest.mark.parametrize(("scale", "unit"), [(1.0, None), (1e3, "ms"), (1e6, "us"), (1e9, "ns")])
 @pytest.mark.parametrize("rate", [20.0, 100.0, 1000.0])
 def test_time_in_ms_us_ns_is_converted_to_seconds(tmp_path, scale, unit, rate):
     """Loggers write millis(), micros() or nanoseconds since the epoch; read as seconds a 1 kHz

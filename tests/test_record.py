@@ -223,7 +223,9 @@ def test_one_dead_board_does_not_cost_the_other_its_calibration(tmp_path, capsys
         return record.Device(url=str(path), path=path, reader=types.SimpleNamespace(stats=stats))
 
     session = record.Session(
-        devices=[device(good, 1000), device(dead, 0)], sensor="accel", reason="devices_gone",
+        devices=[device(good, 1000), device(dead, 0)],
+        sensor="accel",
+        reason="devices_gone",
         seconds=1.0,
     )
     monkeypatch.setattr(record, "record_session", lambda *a, **k: session)
