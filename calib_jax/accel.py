@@ -370,7 +370,9 @@ def calibrate_accel(
     # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
     static_norm = float(np.median(np.linalg.norm(means, axis=1)))
     nominal_centre = _nominal(pts, _units_from_norm(static_norm) or "counts", 1.0)[0]
-    n_distinct = min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
+    n_distinct = max(
+        1, min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
+    )
     n_free = int(sum(MODELS[model]))
     if len(means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
         _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])

@@ -179,6 +179,8 @@ class StaticReport:
     rejected: list[tuple[int, int]] = field(default_factory=list)
     """Runs left out as pauses in motion: their means lie more than ``OFF_SPHERE`` robust
     standard deviations off the ellipsoid through the others."""
+    extra_notes: list[str] = field(default_factory=list)
+    """Anything else the detector did that a report should say (interleaved empty rows)."""
 
     @property
     def n_intervals(self) -> int:
@@ -256,7 +258,7 @@ class StaticReport:
 
     def notes(self, sample_rate: float | None = None) -> list[str]:
         """What a calibration report should say about detection (setting, found, candidates)."""
-        out = [self.setting(sample_rate)]
+        out = [self.setting(sample_rate), *self.extra_notes]
         if self.kind == "pose_table":
             return out
         out.append(self.summary(sample_rate))
@@ -684,6 +686,20 @@ def detect_static(
     if min_duration is not None and min_samples is None and not sample_rate:
         raise ValueError("min_duration needs sample_rate; or give min_samples instead")
 
+    if _interleaved_gaps(valid):
+        return _compressed(
+            x,
+            valid,
+            sample_rate,
+            window,
+            threshold,
+            threshold_factor,
+            min_duration,
+            min_samples,
+            trim,
+            pose_table,
+        )
+
     if window is None and n > MAX_SWEEP_SAMPLES:
         return _strided(
             x, valid, sample_rate, threshold, threshold_factor, min_duration, min_samples, trim
@@ -817,6 +833,65 @@ def detect_static(
         candidates=candidates,
         chosen=chosen,
         rejected=rejected,
+    )
+
+
+def _interleaved_gaps(valid: np.ndarray) -> bool:
+    """Many invalid rows in short runs: another packet type interleaved with the sensor's rows
+    (the MicroStrain logs leave the accelerometer cells of every third row empty). Cutting runs
+    at each of them would leave no static interval at all."""
+    bad = ~valid
+    if bad.mean() < 0.05 or bad.all():
+        return False
+    d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    lengths = np.flatnonzero(d == -1) - np.flatnonzero(d == 1)
+    return bool(np.median(lengths) <= 2)
+
+
+def _compressed(
+    x,
+    valid,
+    sample_rate,
+    window,
+    threshold,
+    threshold_factor,
+    min_duration,
+    min_samples,
+    trim,
+    pose_table,
+):
+    """Detection on the valid rows alone (at their own effective rate), mapped back to the
+    log: intervals span the interleaved invalid rows, their means and the mask use only the
+    valid ones."""
+    idx = np.flatnonzero(valid)
+    frac = len(idx) / len(valid)
+    sub = detect_static(
+        x[idx],
+        sample_rate=sample_rate * frac if sample_rate else None,
+        window=window,
+        threshold=threshold,
+        threshold_factor=threshold_factor,
+        min_duration=min_duration,
+        min_samples=min_samples,
+        trim=trim,
+        pose_table=pose_table,
+    )
+    intervals = []
+    mask = np.zeros(len(valid), bool)
+    for iv in sub.intervals:
+        a, b = int(idx[iv.start]), int(idx[iv.stop - 1]) + 1
+        intervals.append(StaticInterval(a, b, iv.mean, iv.std))
+        mask[idx[iv.start : iv.stop]] = True
+    note = (
+        f"{int((~valid).sum())} of {len(valid)} rows interleaved without this sensor's values "
+        "(another packet type): detected on the other rows"
+    )
+    return replace(
+        sub,
+        intervals=intervals,
+        mask=mask,
+        rejected=[(int(idx[a]), int(idx[min(b, len(idx)) - 1]) + 1) for a, b in sub.rejected],
+        extra_notes=[*sub.extra_notes, note],
     )
 
 

@@ -218,3 +218,24 @@ def test_a_long_log_is_read_quickly():
     x = np.tile(log.raw, (reps, 1))[:2_000_000]
     rep = detect_static(x, sample_rate=1000.0)
     assert rep.n_intervals >= 40 * (reps - 1)
+
+
+def test_interleaved_empty_rows_do_not_cut_every_pose():
+    """A logger that interleaves another packet type leaves the accelerometer cells of every
+    third row empty (the AirBrakes MicroStrain logs): cut at each NaN row, no run was long
+    enough and the error blamed how long the poses were held. Detected on the other rows, the
+    poses are found as in the log without the gaps, and the report says why."""
+    from calib_jax.simulate import random_params, simulate_accel
+
+    log = simulate_accel(
+        random_params(3), samples_per_pose=150, transition_samples=60, noise=2e-3, rng=3
+    )
+    x = log.raw.copy()
+    x[::3] = np.nan
+    valid = np.all(np.isfinite(x), axis=1)
+    rep = detect_static(x, sample_rate=100.0, valid=valid)
+    clean = detect_static(log.raw[valid], sample_rate=100.0 * valid.mean())
+    assert rep.n_intervals == clean.n_intervals >= 40
+    np.testing.assert_allclose(rep.means(), clean.means())
+    assert not rep.mask[~valid].any()
+    assert any("interleaved" in n for n in rep.notes(100.0))
