@@ -171,7 +171,13 @@ def load_input(
         raise _unreadable(path, why) from exc
     if len(log) == 0:
         raise ValueError(f"{path} has no data rows")
+    _LOADER_NOTES.extend(log.notes)
     return log
+
+
+# What the loader noted about the file (rows skipped, cells not finite, guessed columns): an
+# error later on prints them first, since they are often its real cause.
+_LOADER_NOTES: list[str] = []
 
 
 def _writable_parent(path: str, option: str) -> None:
@@ -669,6 +675,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help (0) or a usage error (2): argparse has said why
         return exc.code if isinstance(exc.code, int) else 2
     debug = os.environ.get("CALIB_JAX_DEBUG", "") not in ("", "0")
+    _LOADER_NOTES.clear()
     try:
         _prepare_outputs(args)
         with warnings.catch_warnings():
@@ -683,6 +690,8 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         if _is_input_error(exc):
+            for note in _LOADER_NOTES:
+                print(f"note: {note}", file=sys.stderr)
             print(f"error: {_error_text(exc, args)}", file=sys.stderr)
             return 2
         print(

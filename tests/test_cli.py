@@ -85,6 +85,22 @@ def test_bad_input_exits_2_with_the_fix(tmp_path, capsys):
     assert main(["accel", str(ferraris), "--sample-rate", "102.4", "--model", "accel6"]) == 0
 
 
+def test_an_error_prints_what_the_loader_noticed_first(tmp_path, capsys):
+    """The loader's notes (rows skipped, cells not finite) are often the real cause of a later
+    refusal; they used to be collected and dropped when the fit refused the log."""
+    rows = ["t,ax,ay,az"] + [f"{i / 100},0.01,0.02,1.0" for i in range(300)]
+    rows[5] = "0.04,0.01,1.0"  # one field short
+    rows[9] = "0.08,0.01,oops,1.0"  # a text cell
+    log = tmp_path / "flat.csv"
+    log.write_text("\n".join(rows) + "\n")
+    assert main(["accel", str(log)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    notes = [ln for ln in err if ln.startswith("note:")]
+    assert any("wrong number of fields" in n for n in notes), err
+    assert any("not finite" in n for n in notes), err
+    assert err[-1].startswith("error:") and "distinct poses" in err[-1]
+
+
 def test_headerless_with_column_mapping(tmp_path):
     # imu_tk-style headerless text with columns in another order
     x = np.loadtxt(demo_log_path())[:, [0, 3, 2, 1]]  # t, az, ay, ax
