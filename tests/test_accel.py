@@ -233,3 +233,14 @@ def test_g_that_contradicts_the_unit_is_an_error(sim48):
     cal = cj.calibrate_accel(raw, g=1.0, output_units="g")
     gain_in_g = cj.calibrate_accel(sim48.raw).params[0]
     assert cal.success and abs(cal.params[0] / 9.80665 - gain_in_g) < 1e-6
+
+
+def test_declared_counts_are_never_refused_for_their_scale(sim48):
+    """A log in small raw units (norm 0.05: no unit the table knows) was refused both with
+    --units g and with --units counts, each time advising --units counts. Counts take any
+    scale; g still has to look like g."""
+    raw = 0.05 * sim48.raw
+    with pytest.raises(ValueError, match="pass --units counts"):
+        cj.calibrate_accel(raw, units="g")
+    cal = cj.calibrate_accel(raw, units="counts")
+    assert cal.success and cal.input_units == "counts"
