@@ -339,6 +339,10 @@ class MARGRecord:
     __hash__ = None  # type: ignore[assignment]
 
 
+STATIC_RMS_LIMIT = 1e-2
+"""accel="auto" uses paper 1's static fit only when it leaves less than this (relative to g)."""
+
+
 def calibrate_marg_log(
     log,
     *,
@@ -395,6 +399,14 @@ def calibrate_marg_log(
         try:
             acal = calibrate_accel(log, g=g, solver=solver, sensor_id=sensor_id, **static_options)
             method = "static"
+            if accel == "auto" and not acal.rms_after < STATIC_RMS_LIMIT:
+                # the detector finds short quiet moments in a tumble too; a static fit that
+                # leaves over 1 % of g was fitted to motion, not rests (real multi-pose logs
+                # here: 1e-4 to 3e-3)
+                raise ValueError(
+                    f"the {acal.n_intervals} quiet stretches it found leave {acal.rms_after:.2g} "
+                    f"of g after the fit (over {STATIC_RMS_LIMIT:g}): they are not rests"
+                )
         except ValueError as exc:
             if accel == "static":
                 raise
