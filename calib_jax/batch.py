@@ -34,7 +34,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .accel import MODELS as ACCEL_MODELS
-from .accel import initial_guess_moments
+from .accel import _units_from_norm, initial_guess_moments
 from .geometry import moments
 from .linalg import cholesky_small, eigh_small, inv3
 from .lm import LMResult, Status, lm_solve, optx_solve
@@ -46,18 +46,6 @@ MIN_SAMPLES = 20
 FLAT = 1e-3  # smallest / largest eigenvalue of the direction scatter: below is one plane
 # |g| in the physical units an accelerometer log comes in (counts: any output unit)
 G_IN_UNITS = {"g": 1.0, "m/s^2": 9.80665}
-
-
-def _units_from_norm(norm: float) -> str | None:
-    """The unit a static norm suggests (calib_jax.accel's table: 0.3-3 g, 3-30 m/s^2, above
-    counts)."""
-    if 0.3 <= norm <= 3.0:
-        return "g"
-    if 3.0 < norm <= 30.0:
-        return "m/s^2"
-    if norm > 30.0:
-        return "counts"
-    return None
 
 
 def check_magnitude(value, name: str, n: int | None = None) -> np.ndarray:
