@@ -691,13 +691,15 @@ def detect_static(
             x,
             valid,
             sample_rate,
-            window,
-            threshold,
-            threshold_factor,
-            min_duration,
-            min_samples,
-            trim,
-            pose_table,
+            dict(
+                window=window,
+                threshold=threshold,
+                threshold_factor=threshold_factor,
+                min_duration=min_duration,
+                min_samples=min_samples,
+                trim=trim,
+                pose_table=pose_table,
+            ),
         )
 
     if window is None and n > MAX_SWEEP_SAMPLES:
@@ -848,34 +850,13 @@ def _interleaved_gaps(valid: np.ndarray) -> bool:
     return bool(np.median(lengths) <= 2)
 
 
-def _compressed(
-    x,
-    valid,
-    sample_rate,
-    window,
-    threshold,
-    threshold_factor,
-    min_duration,
-    min_samples,
-    trim,
-    pose_table,
-):
+def _compressed(x, valid, sample_rate, options: dict):
     """Detection on the valid rows alone (at their own effective rate), mapped back to the
     log: intervals span the interleaved invalid rows, their means and the mask use only the
     valid ones."""
     idx = np.flatnonzero(valid)
     frac = len(idx) / len(valid)
-    sub = detect_static(
-        x[idx],
-        sample_rate=sample_rate * frac if sample_rate else None,
-        window=window,
-        threshold=threshold,
-        threshold_factor=threshold_factor,
-        min_duration=min_duration,
-        min_samples=min_samples,
-        trim=trim,
-        pose_table=pose_table,
-    )
+    sub = detect_static(x[idx], sample_rate=sample_rate * frac if sample_rate else None, **options)
     intervals = []
     mask = np.zeros(len(valid), bool)
     for iv in sub.intervals:
