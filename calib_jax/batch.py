@@ -90,6 +90,16 @@ def check_reference_magnitude(g, units: str | None, norm: float) -> None:
             )
 
 
+def reference_for_log(norm: float, g=None) -> float:
+    """The accelerometer reference magnitude for one log from its static norm: the given ``g``
+    (checked against the log's unit, :func:`check_reference_magnitude`), else the |g| of the
+    unit the norm suggests (1 for g and counts, 9.80665 for m/s^2)."""
+    if g is None:
+        return G_IN_UNITS.get(_units_from_norm(float(norm)) or "", 1.0)
+    check_reference_magnitude(g, None, norm)
+    return float(g)
+
+
 def quadric_theta(Q: jax.Array, c: jax.Array, scale: jax.Array) -> jax.Array:
     """theta such that phi(x)' theta = scale ((x - c)' Q (x - c) - 1)."""
     Qc = Q @ c

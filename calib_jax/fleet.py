@@ -58,11 +58,10 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
 
     jax.config.update("jax_enable_x64", True)
     from .batch import (
-        G_IN_UNITS,
         _units_from_norm,
         calibrate_accel_batch,
         calibrate_mag_batch,
-        check_reference_magnitude,
+        reference_for_log,
     )
 
     options = dict(options)
@@ -75,11 +74,9 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
                 # the reference magnitude follows each log's unit unless the user gave one,
                 # which must then fit that unit (m/s^2 logs with g = 1 gave gains of 9.8)
                 norm = float(np.median(np.linalg.norm(x[m], axis=1))) if m.any() else np.nan
-                unit = _units_from_norm(norm)
-                g = g_given if g_given is not None else G_IN_UNITS.get(unit or "", 1.0)
-                check_reference_magnitude(g, None, norm)
-                info.update(units=unit, g=float(g))
-                gs.append(float(g))
+                g = reference_for_log(norm, g_given)
+                info.update(units=_units_from_norm(norm), g=g)
+                gs.append(g)
             prepared.append((p, x, m, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
             # ValueError/OSError carry a message meant for the user; anything else is a bug in

@@ -555,11 +555,11 @@ def calibrate_devices(
     """Several recorded logs in one vmapped batch fit per sensor; JSON beside each log.
 
     Accelerometer: paper 1's fit on the static samples (the detector run per log);
-    magnetometer: the full ellipsoid on every finite sample. ``g`` defaults to 1 (output in
-    g), or 9.80665 when the static readings have norm 3-30 (m/s^2). Returns one dict per
+    magnetometer: the full ellipsoid on every finite sample. ``g`` defaults to each log's
+    unit (1 g, or 9.80665 for m/s^2; batch.reference_for_log). Returns one dict per
     device (also what is written): ``{"accel": {...}, "mag": {...}}``.
     """
-    from .batch import calibrate_accel_batch, calibrate_mag_batch, check_reference_magnitude
+    from .batch import calibrate_accel_batch, calibrate_mag_batch, reference_for_log
     from .io.files import load_log
     from .lm import is_converged, status_message
     from .padding import bucket
@@ -590,22 +590,16 @@ def calibrate_devices(
             raw[i, : len(x)] = np.where(np.isfinite(x), x, 0.0)
             mask[i, : len(x)] = m
         if kind == "accel":
-            ref = g
-            norms = [
-                np.median(np.linalg.norm(x[m], axis=1))
-                for x, m in zip(xs, masks, strict=True)
-                if m.any()
-            ]
-            if ref is None:
-                ref = 9.80665 if norms and 3.0 < float(np.median(norms)) <= 30.0 else 1.0
-            else:  # a given g must match each log's unit (m/s^2 data with g = 1: error)
-                for x, m, p in zip(xs, masks, paths, strict=True):
-                    if m.any():
-                        try:
-                            norm = float(np.median(np.linalg.norm(x[m], axis=1)))
-                            check_reference_magnitude(ref, None, norm)
-                        except ValueError as exc:
-                            raise ValueError(f"{p}: {exc}") from None
+            # each log's reference follows its unit, or is the given g checked against it (the
+            # rule of calib-jax batch: batch.reference_for_log)
+            refs = []
+            for x, m, p in zip(xs, masks, paths, strict=True):
+                norm = float(np.median(np.linalg.norm(x[m], axis=1))) if m.any() else np.nan
+                try:
+                    refs.append(reference_for_log(norm, g))
+                except ValueError as exc:
+                    raise ValueError(f"{p}: {exc}") from None
+            ref = np.asarray(refs)
             r = calibrate_accel_batch(raw, mask, g=ref, solver=solver)
         else:
             r = calibrate_mag_batch(raw, mask, field=field, solver=solver)
@@ -617,7 +611,7 @@ def calibrate_devices(
                 block = {
                     "params": split_params(p),
                     "stderr": split_params(s),
-                    "g": ref,
+                    "g": float(ref[i]),
                     "static_samples": int(masks[i].sum()),
                 }
             else:
