@@ -41,8 +41,9 @@ from .geometry import (
 from .io.files import SensorLog
 from .lm import LMResult, fit_status, lm_solve, optx_solve, status_message
 from .models.accel import PARAM_NAMES, normalized_sphere_residual
+from .observations import AccelObservations, accel_observations, detection_found
 from .padding import pad_rows
-from .static import StaticReport, detect_static, distinct_directions
+from .static import StaticReport, distinct_directions
 
 G_STANDARD = 9.80665
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
@@ -154,19 +155,6 @@ def _compiled(solver: str, model: str, options: tuple) -> callable:
 _UNIT_RANGES = "g: 0.3-3, m/s^2: 3-30, counts: above 30"
 
 
-def _detection_found(report: StaticReport, sample_rate: float | None) -> str:
-    """What the detector found, for an error message."""
-    if report.kind == "pose_table":
-        return report.setting(sample_rate)
-    tried = len(report.candidates)
-    most = max((c.n_poses for c in report.candidates), default=0)
-    setting = report.setting(sample_rate).removeprefix("static detection: ")
-    found = f"found {report.n_intervals} static intervals with {setting}"
-    if tried > 1:
-        found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
-    return found
-
-
 def _units_from_norm(norm: float) -> str | None:
     if 0.3 <= norm <= 3.0:
         return "g"
@@ -175,21 +163,6 @@ def _units_from_norm(norm: float) -> str | None:
     if norm > 30.0:
         return "counts"
     return None
-
-
-def _saturated(
-    x: np.ndarray, min_count: int = 20, min_fraction: float = 0.005
-) -> list[tuple[int, str, float]]:
-    """Axes whose extreme value is held by many samples: (axis, 'max'|'min', value)."""
-    out = []
-    n = len(x)
-    for ax in range(3):
-        col = x[:, ax]
-        for kind, v in (("max", col.max()), ("min", col.min())):
-            cnt = int(np.sum(col == v))
-            if cnt >= max(min_count, min_fraction * n):
-                out.append((ax, kind, float(v)))
-    return out
 
 
 def _nominal(x_static: np.ndarray, units: str, g: float) -> tuple[np.ndarray, float]:
@@ -236,6 +209,47 @@ def _check_plane(flatness: float, normal: np.ndarray) -> None:
 
 def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:+.2f}" for x in v) + "]"
+
+
+def check_poses(
+    obs: AccelObservations, model: str, sample_rate: float | None = None
+) -> tuple[np.ndarray, float]:
+    """The sphere through the fit points (centre, radius) after checking that they can
+    determine the model: a ValueError, reported as a detection or coverage problem, when
+    there are fewer distinct poses than free parameters or all poses lie in one plane.
+    ``calibrate_accel`` and the batch paths (:mod:`calib_jax.fleet`) both call it."""
+    pts = obs.points
+    c_s, r_s = sphere_fit(jnp.asarray(pts), jnp.ones(len(pts)))
+    c_s, r_s = np.asarray(c_s), float(r_s)
+    if not np.isfinite(r_s) or r_s <= 0:
+        c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
+    # counted about the fitted centre and about the nominal one (zero, or mid-range for
+    # unsigned counts): points of a single pose fit no sphere, and about their own arbitrary
+    # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
+    nominal_centre = _nominal(pts, _units_from_norm(obs.static_norm) or "counts", 1.0)[0]
+    n_distinct = max(
+        1, min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
+    )
+    n_free = int(sum(MODELS[model]))
+    if len(obs.means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
+        _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
+    if n_distinct < n_free:
+        hint = (
+            " With six faces (the Ferraris protocol) fit the six-parameter model instead "
+            "(model='accel6', --model accel6)."
+            if model == "accel9" and n_distinct >= 6
+            else ""
+        )
+        raise ValueError(
+            f"only {n_distinct} distinct poses (10 degrees apart) among the {len(pts)} fit "
+            f"points: static detection {detection_found(obs.report, sample_rate)}; the "
+            f"{n_free}-parameter model needs at least {n_free} poses spread over the sphere "
+            "(paper 1 uses 48). Record more orientations, hold each still for at least half a "
+            "second, or include slow tilting motion as quasi-static samples (use='samples' "
+            "with a short window, e.g. --use samples --window 10 --threshold-factor 20)." + hint
+        )
+
+    return c_s, r_s
 
 
 # ---------------------------------------------------------------------------------------------
@@ -317,80 +331,26 @@ def calibrate_accel(
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     if model not in MODELS:
         raise ValueError(f"model must be one of {tuple(MODELS)}, got {model!r}")
-    if use not in ("means", "samples"):
-        raise ValueError(f"use must be 'means' or 'samples', got {use!r}")
     units = _UNIT_ALIASES.get(str(units).lower(), units) if units != "auto" else "auto"
     if units not in ("auto", "counts", "g", "m/s^2"):
         raise ValueError(f"units must be auto, counts, g or m/s^2, got {units!r}")
-    warn: list[str] = list(log_notes)
 
-    finite = np.all(np.isfinite(x), axis=1)
-    n_bad = int((~finite).sum())
-    if finite.sum() == 0:
-        raise ValueError("no finite accelerometer samples: every row has NaN or inf")
-    if n_bad:
-        warn.append(f"{n_bad} rows with NaN or inf were left out of the fit")
-    valid = finite.copy()
-    for ax, kind, v in _saturated(x[finite]):
-        hit = finite & (x[:, ax] == v)
-        valid &= ~hit
-        warn.append(
-            f"axis {'xyz'[ax]} is saturated at its {kind} ({v:g}, {int(hit.sum())} samples left "
-            "out): use a wider range setting or avoid poses that drive it to the limit"
-        )
-
-    report = detect_static(
+    obs = accel_observations(
         x,
+        use=use,
         sample_rate=sample_rate,
         window=window,
         threshold=threshold,
         threshold_factor=threshold_factor,
         min_duration=min_duration,
         min_samples=min_samples,
-        valid=valid,
     )
-    warn += report.notes(sample_rate)
-    if report.n_intervals == 0:
-        raise ValueError(
-            "static detection found no static interval: "
-            + _detection_found(report, sample_rate)
-            + "; hold each pose still for at least half a second, or set the detector "
-            "(--window, --threshold-factor, --min-static)"
-        )
-    means = report.means()
-    pts = means if use == "means" else x[report.mask]
+    warn: list[str] = log_notes + obs.notes
+    report, means, pts = obs.report, obs.means, obs.points
 
-    # coverage of the detected poses (a detection failure, reported as such), then units
-    c_s, r_s = sphere_fit(jnp.asarray(pts), jnp.ones(len(pts)))
-    c_s, r_s = np.asarray(c_s), float(r_s)
-    if not np.isfinite(r_s) or r_s <= 0:
-        c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
-    # counted about the fitted centre and about the nominal one (zero, or mid-range for
-    # unsigned counts): points of a single pose fit no sphere, and about their own arbitrary
-    # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
-    static_norm = float(np.median(np.linalg.norm(means, axis=1)))
-    nominal_centre = _nominal(pts, _units_from_norm(static_norm) or "counts", 1.0)[0]
-    n_distinct = max(
-        1, min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
-    )
+    c_s, r_s = check_poses(obs, model, sample_rate)
+    static_norm = obs.static_norm
     n_free = int(sum(MODELS[model]))
-    if len(means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
-        _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
-    if n_distinct < n_free:
-        hint = (
-            " With six faces (the Ferraris protocol) fit the six-parameter model instead "
-            "(model='accel6', --model accel6)."
-            if model == "accel9" and n_distinct >= 6
-            else ""
-        )
-        raise ValueError(
-            f"only {n_distinct} distinct poses (10 degrees apart) among the {len(pts)} fit "
-            f"points: static detection {_detection_found(report, sample_rate)}; the "
-            f"{n_free}-parameter model needs at least {n_free} poses spread over the sphere "
-            "(paper 1 uses 48). Record more orientations, hold each still for at least half a "
-            "second, or include slow tilting motion as quasi-static samples (use='samples' "
-            "with a short window, e.g. --use samples --window 10 --threshold-factor 20)." + hint
-        )
 
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
     detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
@@ -493,7 +453,7 @@ def calibrate_accel(
             )
 
     # errors before/after over interval means, noise floor from within-interval scatter
-    x_static = x[report.mask]
+    x_static = x[report.mask & obs.valid]
     offset, scale = _nominal(x_static, units, g)
     before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
     after, floor = interval_errors(params, g, x, report)

@@ -204,13 +204,14 @@ def _unit_sphere_moments(dtype) -> jax.Array:
     return moments(jnp.asarray(d, dtype), jnp.ones(len(d), dtype))
 
 
-def _checks(S, n_params):
-    """Status before fitting, from the moments alone: too few samples, or one plane."""
+def _checks(S, n_params, min_points=MIN_SAMPLES):
+    """Status before fitting, from the moments alone: too few points (fewer than
+    ``min_points``, or than twice the parameters), or one plane."""
     n = S[9, 9]
     scatter = S[6:9, 6:9] / jnp.maximum(n, 1.0)
     ev, _ = eigh_small(scatter)
     flat = ev[0] <= FLAT * jnp.maximum(ev[2], 1e-300)
-    too_few = n < jnp.maximum(MIN_SAMPLES, 2 * n_params)
+    too_few = n < max(min_points, n_params + 1)
     return jnp.where(
         too_few, int(Status.INSUFFICIENT_DATA), jnp.where(flat, int(Status.NO_COVERAGE), -1)
     )
@@ -239,10 +240,10 @@ def _nan_result(res: LMResult, bad: jax.Array) -> LMResult:
     )
 
 
-def _accel_one(S, mean, k, g, model, solver, options):
+def _accel_one(S, mean, k, g, model, solver, options, min_points):
     free = np.asarray(ACCEL_MODELS[model])
     idx = np.flatnonzero(free)
-    pre = _checks(S, len(idx))
+    pre = _checks(S, len(idx), min_points)
     S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = jnp.where(jnp.asarray(free), initial_guess_moments(S), 0.0)
     n = S[9, 9]
@@ -260,8 +261,8 @@ def _accel_one(S, mean, k, g, model, solver, options):
     return params, se_n * T, jnp.where(pre >= 0, pre, res.status), rms, res, pre >= 0
 
 
-def _mag_one(S, mean, k, field, model, solver, options):
-    pre = _checks(S, N_PARAMS[model])
+def _mag_one(S, mean, k, field, model, solver, options, min_points):
+    pre = _checks(S, N_PARAMS[model], min_points)
     S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = ellipsoid_start_moments(S, model)
     n = S[9, 9]
@@ -279,13 +280,15 @@ def _mag_one(S, mean, k, field, model, solver, options):
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(kind: str, model: str, solver: str, options: tuple, shard: bool):
+def _compiled(
+    kind: str, model: str, solver: str, options: tuple, shard: bool, min_points: int = MIN_SAMPLES
+):
     one = _accel_one if kind == "accel" else _mag_one
 
     def run(raw, valid, ref):
         S, mean, k = _batch_moments(raw, valid)
         params, stderr, status, rms, res, bad = jax.vmap(
-            lambda S, m, k, r: one(S, m, k, r, model, solver, dict(options))
+            lambda S, m, k, r: one(S, m, k, r, model, solver, dict(options), min_points)
         )(S, mean, k, ref)
         nan = jnp.nan
         return BatchResult(
@@ -388,6 +391,7 @@ def calibrate_accel_batch(
     solver: str = "lm1",
     solver_options: dict | None = None,
     shard: bool = False,
+    min_points: int = MIN_SAMPLES,
 ) -> BatchResult:
     """Paper 1's sample-level fit for many accelerometers in one jitted, vmapped call.
 
@@ -405,6 +409,10 @@ def calibrate_accel_batch(
         As :func:`calib_jax.calibrate_accel`.
     shard : bool
         Split the sensors over all local devices (jax.sharding).
+    min_points : int
+        Fewer valid rows than this (or than the free parameters plus one) is
+        INSUFFICIENT_DATA. The default suits samples; interval means that passed
+        :func:`calib_jax.accel.check_poses` need only the parameters plus one.
 
     Returns
     -------
@@ -419,7 +427,7 @@ def calibrate_accel_batch(
     g = check_magnitude(g, "g", n)
     raw, valid, ref = _prepare(raw, mask, g, shard)
     opts = tuple(sorted((solver_options or {}).items()))
-    out = _compiled("accel", model, solver, opts, shard)(raw, valid, ref)
+    out = _compiled("accel", model, solver, opts, shard, int(min_points))(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)
 
 

@@ -310,11 +310,17 @@ def run_batch(args: argparse.Namespace) -> int:
             sensor=args.sensor,
             chunk=args.chunk,
             columns=args.columns,
+            use=args.use,
             **options,
         )
     else:
         results = calibrate_files(
-            paths, sensor=args.sensor, chunk=args.chunk, columns=args.columns, **options
+            paths,
+            sensor=args.sensor,
+            chunk=args.chunk,
+            columns=args.columns,
+            use=args.use,
+            **options,
         )
     out = open(args.json, "w") if args.json else None  # noqa: SIM115
     n_ok = n_all = 0
@@ -533,6 +539,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--field", type=_pos_float, default=None, help="magnetometer field magnitude")
     b.add_argument("--columns", default=None, help="column mapping for every file")
+    b.add_argument(
+        "--use",
+        default="means",
+        choices=["means", "samples"],
+        help="accelerometer fit points, as calib-jax accel: static-interval means or samples",
+    )
     b.add_argument("--chunk", type=_pos_int, default=256, help="files per batch fit")
     b.add_argument(
         "--dask",

@@ -19,41 +19,66 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.files import load_log
+from .io.files import SensorLog, load_log
 from .lm import is_converged, status_message
+from .observations import accel_observations, screen_samples
 from .padding import bucket
 
 SENSORS = ("accel", "mag")
 
 
-def prepare(
-    path: str | Path, sensor: str = "accel", columns: str | None = None
-) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Samples (N, 3), fit mask (N,) and notes for one log.
+def prepare_log(
+    log: SensorLog,
+    sensor: str = "accel",
+    *,
+    model: str | None = None,
+    use: str = "means",
+    **detector,
+) -> tuple[np.ndarray, dict]:
+    """The fit points (n, 3) of one loaded log and what was found, through the same front door
+    as :func:`calib_jax.calibrate_accel` / :func:`calib_jax.calibrate_mag`
+    (:mod:`calib_jax.observations`), so a batch fits what the single fit would.
 
-    Accelerometer: the static samples (moving-variance detector with its automatic threshold),
-    i.e. paper 1's sample-level fit. Magnetometer: every finite sample.
+    Accelerometer: the static-interval means (``use="means"``, the default of
+    ``calibrate_accel``) or every static sample (``use="samples"``), after the same pose
+    checks (:func:`calib_jax.accel.check_poses`: a ValueError when the poses cannot determine
+    ``model``). Magnetometer: every finite sample off a saturated axis.
     """
     if sensor not in SENSORS:
         raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
-    log = load_log(path, columns=columns, sensor=sensor)
     x = log.acc if sensor == "accel" else log.mag
     if x is None:
-        raise ValueError(f"{path}: no {sensor} columns; map them with --columns")
+        cols = "ax, ay, az" if sensor == "accel" else "mx, my, mz"
+        raise ValueError(f"{log.path}: no {sensor} columns ({cols}); map them with --columns")
     x = np.asarray(x, float)
-    finite = np.all(np.isfinite(x), axis=1)
-    info = {"samples": len(x), "notes": list(log.notes)}
+    info: dict = {"samples": len(x)}
     if sensor == "mag":
-        return x, finite, info
-    from .static import detect_static
+        valid, notes = screen_samples(x, "mag")
+        info["notes"] = list(log.notes) + notes
+        return x[valid], info
+    from .accel import check_poses
 
-    report = detect_static(x, sample_rate=log.sample_rate, valid=finite)
-    info["static_intervals"] = report.n_intervals
-    return x, report.mask & finite, info
+    obs = accel_observations(x, use=use, sample_rate=log.sample_rate, **detector)
+    check_poses(obs, model or "accel9", log.sample_rate)
+    info.update(
+        notes=list(log.notes) + obs.notes,
+        static_intervals=obs.report.n_intervals,
+        use=use,
+        static_norm=obs.static_norm,
+    )
+    return obs.points, info
 
 
-def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict) -> list[dict]:
-    """Prepare and fit one chunk of files (also the Dask task)."""
+def fit_prepared(
+    prepared: list[tuple[str, np.ndarray, dict]], sensor: str, options: dict
+) -> list[dict]:
+    """One batch fit of prepared logs ``(name, points, info)``: one result dict per log.
+
+    The accelerometer's reference magnitude follows each log's unit unless ``options["g"]``
+    gives one, which must then fit that unit (:func:`calib_jax.batch.reference_for_log`; a log
+    it does not fit gets a ``load_error`` entry). Used by :func:`calibrate_files` and by the
+    recorder's multi-device fit.
+    """
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -65,53 +90,73 @@ def _fit_chunk(paths: list[str], sensor: str, columns: str | None, options: dict
     )
 
     options = dict(options)
+    out, fit, gs = [], [], []
     g_given = options.pop("g", None) if sensor == "accel" else None
-    prepared, out, gs = [], [], []
+    for name, pts, info in prepared:
+        if sensor == "accel":
+            try:
+                g = reference_for_log(info["static_norm"], g_given)
+            except ValueError as exc:
+                out.append({"path": str(name), "status": "load_error", "message": str(exc)})
+                continue
+            info = {**info, "units": _units_from_norm(info["static_norm"]), "g": g}
+            gs.append(g)
+        fit.append((name, pts, info))
+    if not fit:
+        return out
+    n = bucket(max(len(x) for _, x, _ in fit))
+    raw = np.zeros((len(fit), n, 3))
+    mask = np.zeros((len(fit), n), bool)
+    for i, (_, x, _) in enumerate(fit):
+        raw[i, : len(x)] = x
+        mask[i, : len(x)] = True
+    if sensor == "accel":
+        # interval means: the pose checks ran on the host; the batch's own floor is the
+        # model's parameter count plus one
+        r = calibrate_accel_batch(raw, mask, g=np.asarray(gs), min_points=10, **options)
+    else:
+        r = calibrate_mag_batch(raw, mask, **options)
+    params, stderr = np.asarray(r.params), np.asarray(r.stderr)
+    for i, (name, _, info) in enumerate(fit):
+        code = int(r.status[i])
+        out.append(
+            {
+                "path": str(name),
+                "status": "ok" if is_converged(code) else "failed",
+                "solver_status": code,
+                "message": status_message(code),
+                "params": params[i].tolist(),
+                "stderr": stderr[i].tolist(),
+                "rms": float(r.rms[i]),
+                "iterations": int(r.iterations[i]),
+                "n_points": int(r.n_samples[i]),
+                **info,
+            }
+        )
+    return out
+
+
+def _fit_chunk(
+    paths: list[str], sensor: str, columns: str | None, options: dict, use: str = "means"
+) -> list[dict]:
+    """Prepare and fit one chunk of files (also the Dask task)."""
+    options = dict(options)
+    prep_opts = {"model": options.get("model")} if sensor == "accel" else {}
+    if sensor == "accel":
+        prep_opts["use"] = use
+    prepared, out = [], []
     for p in paths:
         try:
-            x, m, info = prepare(p, sensor, columns)
-            if sensor == "accel":
-                # the reference magnitude follows each log's unit unless the user gave one,
-                # which must then fit that unit (m/s^2 logs with g = 1 gave gains of 9.8)
-                norm = float(np.median(np.linalg.norm(x[m], axis=1))) if m.any() else np.nan
-                g = reference_for_log(norm, g_given)
-                info.update(units=_units_from_norm(norm), g=g)
-                gs.append(g)
-            prepared.append((p, x, m, info))
+            log = load_log(p, columns=columns, sensor=sensor)
+            pts, info = prepare_log(log, sensor, **prep_opts)
+            prepared.append((p, pts, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
             # ValueError/OSError carry a message meant for the user; anything else is a bug in
             # reading this file, reported with its type instead of aborting the other files
             known = isinstance(exc, ValueError | OSError)
             msg = str(exc) if known else f"{type(exc).__name__} while reading {p}: {exc}"
             out.append({"path": str(p), "status": "load_error", "message": msg})
-    if prepared:
-        n = bucket(max(len(x) for _, x, _, _ in prepared))
-        raw = np.zeros((len(prepared), n, 3))
-        mask = np.zeros((len(prepared), n), bool)
-        for i, (_, x, m, _) in enumerate(prepared):
-            raw[i, : len(x)] = np.where(np.isfinite(x), x, 0.0)
-            mask[i, : len(x)] = m
-        fit = calibrate_accel_batch if sensor == "accel" else calibrate_mag_batch
-        if sensor == "accel":
-            options["g"] = np.asarray(gs)
-        r = fit(raw, mask, **options)
-        params, stderr = np.asarray(r.params), np.asarray(r.stderr)
-        for i, (p, _, _, info) in enumerate(prepared):
-            code = int(r.status[i])
-            out.append(
-                {
-                    "path": str(p),
-                    "status": "ok" if is_converged(code) else "failed",
-                    "solver_status": code,
-                    "message": status_message(code),
-                    "params": params[i].tolist(),
-                    "stderr": stderr[i].tolist(),
-                    "rms": float(r.rms[i]),
-                    "iterations": int(r.iterations[i]),
-                    "n_samples": int(r.n_samples[i]),
-                    **info,
-                }
-            )
+    out += fit_prepared(prepared, sensor, options)
     order = {str(p): k for k, p in enumerate(paths)}
     return sorted(out, key=lambda d: order[d["path"]])
 
@@ -127,18 +172,22 @@ def calibrate_files(
     sensor: str = "accel",
     chunk: int = 256,
     columns: str | None = None,
+    use: str = "means",
     progress: bool = True,
     **options,
 ) -> Iterator[dict]:
     """Calibrate many logs chunk by chunk, yielding one result dict per file, in order.
 
-    ``options`` go to the batch fit (``g``, ``model``, ``solver``, ``field`` ...). Memory
-    holds one chunk; with ``progress`` a line on stderr counts files, failures and rate.
+    Each log is prepared as :func:`calib_jax.calibrate_accel` / :func:`calib_jax.calibrate_mag`
+    would prepare it (:func:`prepare_log`; ``use`` as in ``calibrate_accel``), so a file gets
+    the parameters its single fit gives. ``options`` go to the batch fit (``g``, ``model``,
+    ``solver``, ``field`` ...). Memory holds one chunk; with ``progress`` a line on stderr
+    counts files, failures and rate.
     """
     paths = [str(p) for p in paths]
     t0, done, failed = time.perf_counter(), 0, 0
     for part in _chunks(paths, chunk):
-        for res in _fit_chunk(part, sensor, columns, options):
+        for res in _fit_chunk(part, sensor, columns, options, use):
             done += 1
             failed += res["status"] != "ok"
             yield res
@@ -163,6 +212,7 @@ def calibrate_files_dask(
     sensor: str = "accel",
     chunk: int = 256,
     columns: str | None = None,
+    use: str = "means",
     **options,
 ) -> list[dict]:
     """:func:`calibrate_files` with the chunks spread over a Dask cluster.
@@ -190,7 +240,7 @@ def calibrate_files_dask(
     try:
         parts = list(_chunks(paths, chunk))
         futures = client.map(
-            _fit_chunk, parts, sensor=sensor, columns=columns, options=options, pure=False
+            _fit_chunk, parts, sensor=sensor, columns=columns, options=options, use=use, pure=False
         )
         results = client.gather(futures)
     finally:

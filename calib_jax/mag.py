@@ -35,9 +35,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-# TODO(issue 13): _saturated is shared with calibrate_accel; move it to a small shared module
-# (e.g. calib_jax/checks.py) once accel.py is free to edit, and import it from there in both
-from .accel import _saturated
 from .calibration import MagCalibration
 from .geometry import (
     ellipsoid_fit_constrained_moments,
@@ -58,6 +55,7 @@ from .models.mag import (
     soft_iron_matrix,
     unpack,
 )
+from .observations import screen_samples
 from .padding import pad_rows
 
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
@@ -269,33 +267,23 @@ def calibrate_mag(
         )
 
     finite = np.all(np.isfinite(x), axis=1)
-    n_bad = int((~finite).sum())
-    if n_bad:
-        warn.append(f"{n_bad} rows with NaN or inf were left out of the fit")
-    xv = x[finite]
-    if len(xv) < 20:
+    if finite.sum() < 20:
         raise ValueError(
-            f"only {len(xv)} finite samples; an ellipsoid needs many more (record a slow tumble "
-            "through all orientations, a few hundred samples at least)"
+            f"only {int(finite.sum())} finite samples; an ellipsoid needs many more (record a "
+            "slow tumble through all orientations, a few hundred samples at least)"
         )
-
-    big = np.max(np.abs(xv), axis=1)
+    big = np.max(np.abs(x[finite]), axis=1)
     if big.max() > EXTREME:
-        k = int(np.argmax(big))
+        k = int(np.flatnonzero(finite)[np.argmax(big)])
         raise ValueError(
-            f"sample {k} holds {big[k]:.3g}: values beyond {EXTREME:.0e} cannot be fitted in "
+            f"sample {k} holds {big.max():.3g}: values beyond {EXTREME:.0e} cannot be fitted in "
             "float64 (the ellipsoid matrix is 1 / radius^2); convert the data to a physical "
             "unit, or drop the corrupt rows"
         )
-    mean, s = _spread(xv)
-    for ax, kind, v in _saturated(xv):
-        hit = xv[:, ax] == v
-        xv = xv[~hit]
-        warn.append(
-            f"axis {'xyz'[ax]} is saturated at its {kind} ({v:g}, {int(hit.sum())} samples left "
-            "out): the field along it exceeds the sensor's range; use a wider range setting, "
-            "or move away from the magnet or iron that drives it to the limit"
-        )
+    _spread(x[finite])  # all samples identical (a stuck sensor) is that error, not saturation
+    valid, notes = screen_samples(x, "mag")
+    warn += notes
+    xv = x[valid]
     if len(xv) < 20:
         raise ValueError(f"only {len(xv)} unsaturated finite samples; record within range")
     mean, s = _spread(xv)

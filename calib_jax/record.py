@@ -527,19 +527,6 @@ def calibrate_recording(
     return results
 
 
-def _static_mask(log, window, min_static) -> np.ndarray:
-    x = np.asarray(log.acc, float)
-    ok = np.all(np.isfinite(x), axis=1)
-    rep = detect_static(
-        x,
-        sample_rate=log.sample_rate,
-        window=window,
-        min_duration=min_static if log.sample_rate else None,
-        valid=ok,
-    )
-    return rep.mask & ok
-
-
 def calibrate_devices(
     paths: Sequence[str | Path],
     sensor: str,
@@ -554,15 +541,19 @@ def calibrate_devices(
 ) -> list[dict]:
     """Several recorded logs in one vmapped batch fit per sensor; JSON beside each log.
 
-    Accelerometer: paper 1's fit on the static samples (the detector run per log);
-    magnetometer: the full ellipsoid on every finite sample. ``g`` defaults to each log's
-    unit (1 g, or 9.80665 for m/s^2; batch.reference_for_log). Returns one dict per
-    device (also what is written): ``{"accel": {...}, "mag": {...}}``.
+    Each log goes through the front door of ``calib-jax batch`` (:func:`calib_jax.fleet.
+    prepare_log` and :func:`calib_jax.fleet.fit_prepared`), so a device gets the parameters
+    ``calibrate_accel`` / ``calibrate_mag`` give its log alone. Accelerometer: the fit of the
+    static-interval means; magnetometer: the full ellipsoid on every finite sample. ``g``
+    defaults to each log's unit (1 g, or 9.80665 for m/s^2; batch.reference_for_log); a
+    given ``g`` that contradicts a log's unit is a ValueError naming the log, before anything
+    is written. A log that cannot be prepared gets a ``load_error`` block; the others are
+    fitted. Returns one dict per device (also what is written): ``{"accel": {...}, "mag":
+    {...}}``.
     """
-    from .batch import calibrate_accel_batch, calibrate_mag_batch, reference_for_log
+    from .batch import reference_for_log
+    from .fleet import fit_prepared, prepare_log
     from .io.files import load_log
-    from .lm import is_converged, status_message
-    from .padding import bucket
 
     say = echo or (lambda s: None)
     logs = [load_log(p) for p in paths]
@@ -573,46 +564,34 @@ def calibrate_devices(
     ]
     kinds = {"accel": ["accel"], "mag": ["mag"], "marg": ["accel", "mag"]}[sensor]
     for kind in kinds:
-        xs, masks = [], []
-        for lg, p in zip(logs, paths, strict=True):
-            x = lg.acc if kind == "accel" else lg.mag
-            if x is None:
-                cols = "ax, ay, az" if kind == "accel" else "mx, my, mz"
-                raise ValueError(f"{p}: no {kind} columns ({cols}); record with --columns")
-            x = np.asarray(x, float)
-            ok = np.all(np.isfinite(x), axis=1)
-            xs.append(x)
-            masks.append(_static_mask(lg, window, min_static) if kind == "accel" else ok)
-        n = bucket(max(len(x) for x in xs))
-        raw = np.zeros((len(xs), n, 3))
-        mask = np.zeros((len(xs), n), bool)
-        for i, (x, m) in enumerate(zip(xs, masks, strict=True)):
-            raw[i, : len(x)] = np.where(np.isfinite(x), x, 0.0)
-            mask[i, : len(x)] = m
-        if kind == "accel":
-            # each log's reference follows its unit, or is the given g checked against it (the
-            # rule of calib-jax batch: batch.reference_for_log)
-            refs = []
-            for x, m, p in zip(xs, masks, paths, strict=True):
-                norm = float(np.median(np.linalg.norm(x[m], axis=1))) if m.any() else np.nan
+        prepared = []
+        for i, (lg, p) in enumerate(zip(logs, paths, strict=True)):
+            detector = {}
+            if kind == "accel":
+                detector["window"] = window
+                if min_static is not None and lg.sample_rate:
+                    detector["min_duration"] = min_static
+            try:
+                pts, info = prepare_log(lg, kind, **detector)
+            except ValueError as exc:
+                results[i][kind] = {"status": "load_error", "message": f"{p}: {exc}"}
+                continue
+            if kind == "accel":
                 try:
-                    refs.append(reference_for_log(norm, g))
+                    reference_for_log(info["static_norm"], g)
                 except ValueError as exc:
                     raise ValueError(f"{p}: {exc}") from None
-            ref = np.asarray(refs)
-            r = calibrate_accel_batch(raw, mask, g=ref, solver=solver)
-        else:
-            r = calibrate_mag_batch(raw, mask, field=field, solver=solver)
-        params, stderr = np.asarray(r.params), np.asarray(r.stderr)
-        for i in range(len(xs)):
-            code = int(r.status[i])
-            p, s = params[i], stderr[i]
+            prepared.append((i, pts, info))
+        options = {"g": g} if kind == "accel" else {"field": field}
+        for r in fit_prepared(prepared, kind, {**options, "solver": solver}):
+            i = int(r["path"])
+            p, s = np.asarray(r["params"]), np.asarray(r["stderr"])
             if kind == "accel":
                 block = {
                     "params": split_params(p),
                     "stderr": split_params(s),
-                    "g": float(ref[i]),
-                    "static_samples": int(masks[i].sum()),
+                    "g": r["g"],
+                    "static_intervals": r["static_intervals"],
                 }
             else:
                 block = {
@@ -622,12 +601,9 @@ def calibrate_devices(
                     "field": field,
                 }
             block.update(
-                status="ok" if is_converged(code) else "failed",
-                solver_status=code,
-                message=status_message(code),
-                rms=float(r.rms[i]),
-                iterations=int(r.iterations[i]),
-                n_samples=int(r.n_samples[i]),
+                {k: r[k] for k in ("status", "solver_status", "message", "rms", "iterations")},
+                n_points=r["n_points"],
+                notes=r["notes"],
             )
             results[i][kind] = block
     for i, (res, p) in enumerate(zip(results, paths, strict=True)):
@@ -659,13 +635,16 @@ def _save(write: Callable[[], None], target: Path, errors: list[str]) -> str:
 
 def _batch_line(res: dict) -> str:
     out = []
-    if "accel" in res:
+    for kind in ("accel", "mag"):
+        if res.get(kind, {}).get("status") == "load_error":
+            out.append(f"{kind} not calibrated: {res[kind]['message']}")
+    if res.get("accel", {}).get("status", "load_error") != "load_error":
         a = res["accel"]
         out.append(
             f"accel {a['status']} gains {_fmt(a['params']['gains'])} bias "
             f"{_fmt(a['params']['bias'])} rms {a['rms']:.2e}"
         )
-    if "mag" in res:
+    if res.get("mag", {}).get("status", "load_error") != "load_error":
         m = res["mag"]
         out.append(f"mag {m['status']} center {_fmt(m['center'])} rms {m['rms']:.2e}")
     return "; ".join(out)

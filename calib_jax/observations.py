@@ -1,0 +1,144 @@
+"""The one way from a sensor's samples to the points a fit sees.
+
+Every path that fits an accelerometer or a magnetometer (``calibrate_accel``, ``calibrate_mag``,
+``calib-jax batch`` through :mod:`calib_jax.fleet`, the recorder's batch fit) screens the
+samples and, for an accelerometer, detects the static poses here, so that the same log gives
+the same fit points, the same notes and the same errors whichever path it takes.
+
+- :func:`screen_samples`: rows with NaN or inf, and samples on a saturated axis, are left out
+  (counted, with a note naming the axis and what to change);
+- :func:`accel_observations`: screening, then static detection
+  (:func:`calib_jax.static.detect_static`: intervals, or a pose table's rows), then the fit
+  points: the interval means (one per pose, each weighing the same) or every static sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .static import StaticReport, detect_static
+
+USES = ("means", "samples")
+
+_SATURATION_ADVICE = {
+    "accel": "use a wider range setting or avoid poses that drive it to the limit",
+    "mag": (
+        "the field along it exceeds the sensor's range; use a wider range setting, or move "
+        "away from the magnet or iron that drives it to the limit"
+    ),
+}
+
+
+def saturated_axes(
+    x: np.ndarray, min_count: int = 20, min_fraction: float = 0.005
+) -> list[tuple[int, str, float]]:
+    """Axes whose extreme value is held by many samples: (axis, 'max'|'min', value).
+
+    A sensor at the end of its range repeats the same extreme reading; ``min_count`` samples
+    (and at least ``min_fraction`` of them) at exactly the maximum or minimum of an axis mark
+    it as clipped. ``x`` holds finite rows only.
+    """
+    out = []
+    n = len(x)
+    for ax in range(3):
+        col = x[:, ax]
+        for kind, v in (("max", col.max()), ("min", col.min())):
+            cnt = int(np.sum(col == v))
+            if cnt >= max(min_count, min_fraction * n):
+                out.append((ax, kind, float(v)))
+    return out
+
+
+def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, list[str]]:
+    """The usable samples of an (N, 3) array: a boolean mask (finite and not on a saturated
+    axis) and a note for each kind of sample left out. Raises a ValueError when no row is
+    finite. ``sensor`` ("accel" or "mag") picks the advice in the saturation note."""
+    finite = np.all(np.isfinite(x), axis=1)
+    if not finite.any():
+        what = "accelerometer" if sensor == "accel" else "magnetometer"
+        raise ValueError(f"no finite {what} samples: every row has NaN or inf")
+    notes = []
+    n_bad = int((~finite).sum())
+    if n_bad:
+        notes.append(f"{n_bad} rows with NaN or inf were left out of the fit")
+    valid = finite.copy()
+    for ax, kind, v in saturated_axes(x[finite]):
+        hit = finite & (x[:, ax] == v)
+        valid &= ~hit
+        notes.append(
+            f"axis {'xyz'[ax]} is saturated at its {kind} ({v:g}, {int(hit.sum())} samples left "
+            f"out): {_SATURATION_ADVICE[sensor]}"
+        )
+    return valid, notes
+
+
+@dataclass
+class AccelObservations:
+    """What an accelerometer fit sees of a log."""
+
+    points: np.ndarray
+    """(n, 3) fit points in input units: interval means or static samples (``use``)."""
+    means: np.ndarray
+    """(intervals, 3) the static-interval means (a pose table: its rows)."""
+    report: StaticReport
+    """The detector's report: intervals, the setting it chose and why."""
+    valid: np.ndarray
+    """(N,) bool: samples that are finite and not on a saturated axis."""
+    use: str
+    notes: list[str] = field(default_factory=list)
+    """Screening and detection notes, in the order a user should read them."""
+
+    @property
+    def static_norm(self) -> float:
+        """Median norm of the interval means (what decides the unit)."""
+        return float(np.median(np.linalg.norm(self.means, axis=1)))
+
+
+def accel_observations(
+    x: np.ndarray,
+    *,
+    use: str = "means",
+    sample_rate: float | None = None,
+    **detector,
+) -> AccelObservations:
+    """Screen an (N, 3) accelerometer array, detect its static poses and return the fit points.
+
+    ``detector`` holds :func:`calib_jax.static.detect_static`'s options (window, threshold,
+    threshold_factor, min_duration, min_samples); left out, the detector chooses its own.
+    Raises a ValueError naming what the detector found when there is no static interval.
+    """
+    x = np.asarray(x, float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"accelerometer data must be (samples, 3), got shape {x.shape}")
+    if use not in USES:
+        raise ValueError(f"use must be 'means' or 'samples', got {use!r}")
+    valid, notes = screen_samples(x, "accel")
+    report = detect_static(x, sample_rate=sample_rate, valid=valid, **detector)
+    notes += report.notes(sample_rate)
+    if report.n_intervals == 0:
+        raise ValueError(
+            "static detection found no static interval: "
+            + detection_found(report, sample_rate)
+            + "; hold each pose still for at least half a second, or set the detector "
+            "(--window, --threshold-factor, --min-static)"
+        )
+    means = report.means()
+    points = means if use == "means" else x[report.mask]
+    return AccelObservations(
+        points=points, means=means, report=report, valid=valid, use=use, notes=notes
+    )
+
+
+def detection_found(report: StaticReport, sample_rate: float | None) -> str:
+    """What the detector found, for an error message."""
+    if report.kind == "pose_table":
+        return report.setting(sample_rate)
+    tried = len(report.candidates)
+    most = max((c.n_poses for c in report.candidates), default=0)
+    setting = report.setting(sample_rate).removeprefix("static detection: ")
+    found = f"found {report.n_intervals} static intervals with {setting}"
+    if tried > 1:
+        found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
+    return found
