@@ -10,6 +10,9 @@ rate, which a log's time column gives). Per cell:
 - poses found: poses with at least one detected interval lying wholly inside it, of 60 held;
   "leaky": detected intervals that reach into a motion or span two poses;
 - max |z|: the largest parameter error against the truth, in the fit's standard errors;
+- p: the chi-square (9 degrees of freedom) probability of the parameter error's Mahalanobis
+  distance under the fit's covariance: small only when the error is larger than the fit says,
+  whatever the parameter (a |z| above 3 in one of 96 x 9 parameters happens by chance);
 - rms / floor: the residual over the interval means against the white-noise floor;
 - the setting the sweep chose (window in samples, threshold factor), and the detection time.
 
@@ -33,6 +36,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
+from scipy import stats  # noqa: E402
 
 import calib_jax as cj  # noqa: E402
 from calib_jax.simulate import random_directions, random_params, simulate_accel  # noqa: E402
@@ -88,17 +92,22 @@ def cell(hold, move, rate, noise, rest, seed):
     )
     try:
         cal = cj.calibrate_accel(log.raw, sample_rate=rate)
-        z = (cal.params - log.params) / cal.stderr
+        err = cal.params - log.params
+        z = err / cal.stderr
+        chi2 = float(err @ np.linalg.solve(cal.covariance, err))
         row.update(
             status=cal.status,
             max_abs_z=float(np.max(np.abs(z))),
+            chi2=chi2,
+            p_chi2=float(stats.chi2.sf(chi2, len(err))),
             rms=cal.rms_after,
             floor=cal.noise_floor,
             rms_over_floor=cal.rms_after / cal.noise_floor,
             error=None,
         )
     except ValueError as e:
-        row.update(status="error", max_abs_z=None, rms=None, floor=None, rms_over_floor=None)
+        row.update(status="error", max_abs_z=None, chi2=None, p_chi2=None, rms=None, floor=None,
+                   rms_over_floor=None)  # fmt: skip
         row["error"] = str(e)[:200]
     return row
 
@@ -135,7 +144,7 @@ def main() -> None:
     t_start = time.perf_counter()
     head = (
         f"{'hold':>4} {'move':>4} {'rate':>5} {'noise':>6} {'rest':>4} | {'found':>7} "
-        f"{'leaky':>5} {'out':>3} | {'max|z|':>6} {'rms/floor':>9} | {'window':>6} "
+        f"{'leaky':>5} {'out':>3} | {'max|z|':>6} {'p':>6} {'rms/floor':>9} | {'window':>6} "
         f"{'factor':>6} {'det s':>6}"
     )
     print(head)
@@ -147,7 +156,8 @@ def main() -> None:
         print(
             f"{hold:>4} {move:>4} {rate:>5.0f} {noise * 1e3:>4.0f}mg {rest:>4.0f} | "
             f"{r['poses_found']:>3}/{r['poses_held']:<3} {r['leaky']:>5} {r['left_out']:>3} | "
-            f"{fmt(r['max_abs_z'], '6.2f')} {fmt(r['rms_over_floor'], '9.2f')} | "
+            f"{fmt(r['max_abs_z'], '6.2f')} {fmt(r['p_chi2'], '6.3f')} "
+            f"{fmt(r['rms_over_floor'], '9.2f')} | "
             f"{r['window']:>6} {fmt(r['factor'], '6g')} {r['detect_s']:>6.2f}"
             + (f"  {r['error'][:60]}" if r.get("error") else ""),
             flush=True,
@@ -156,10 +166,17 @@ def main() -> None:
     long = None if args.quick else long_log_timing()
     ok_found = [r for r in rows if r["poses_found"] == r["poses_held"] and r["leaky"] == 0]
     ok_z = [r for r in rows if r["max_abs_z"] is not None and r["max_abs_z"] < 3.0]
+    # by chance alone: a cell has some |z| > 3 among its 9 parameters with probability
+    # 1 - (1 - 0.0027)^9 (independent normals), and p < 0.01 with probability 0.01
+    p_any_z3 = 1.0 - (1.0 - 2.0 * stats.norm.sf(3.0)) ** 9
+    low_p = [r for r in rows if r["p_chi2"] is not None and r["p_chi2"] < 0.01]
     summary = dict(
         cells=len(rows),
         every_pose_found_no_leak=len(ok_found),
         within_3_sigma=len(ok_z),
+        expected_beyond_3_sigma_by_chance=len(rows) * p_any_z3,
+        p_chi2_below_0_01=len(low_p),
+        expected_p_below_0_01_by_chance=0.01 * len(rows),
         median_rms_over_floor=float(np.median([r["rms_over_floor"] for r in rows
                                                if r["rms_over_floor"] is not None])),
         seconds=total,
@@ -175,11 +192,14 @@ def main() -> None:
         f"{POSES} poses per log, random directions, calibrate_accel with no detector option. "
         "found: poses with a detected interval wholly inside them; leaky: intervals reaching "
         "into a motion; out: quiet stretches left out as pauses in motion; max|z|: largest "
-        "parameter error in standard errors; rms/floor: residual over interval means against "
+        "parameter error in standard errors; p: chi-square (9 dof) probability of the parameter "
+        "error under the fit's covariance; rms/floor: residual over interval means against "
         "the white-noise floor.",
         "",
         f"Cells: {len(rows)}; every pose found with no leaky interval: {len(ok_found)}; all "
-        f"parameters within 3 standard errors: {len(ok_z)}; median rms/floor "
+        f"parameters within 3 standard errors: {len(ok_z)} (by chance alone "
+        f"{len(rows) * p_any_z3:.1f} cells would have a |z| > 3); chi-square p < 0.01: "
+        f"{len(low_p)} (by chance {0.01 * len(rows):.1f}); median rms/floor "
         f"{summary['median_rms_over_floor']:.2f}; {total:.0f} s in all.",
         "",
     ]
@@ -190,15 +210,15 @@ def main() -> None:
             "",
         ]
     md += [
-        "| hold s | move s | rate Hz | noise mg | rest s | found | leaky | out | max abs z | "
+        "| hold s | move s | rate Hz | noise mg | rest s | found | leaky | out | max abs z | p | "
         "rms/floor | window | factor | detect s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         md.append(
             f"| {r['hold_s']:g} | {r['move_s']:g} | {r['rate_hz']:g} | {r['noise_g'] * 1e3:g} | "
             f"{r['rest_s']:g} | {r['poses_found']}/{r['poses_held']} | {r['leaky']} | "
-            f"{r['left_out']} | {fmt(r['max_abs_z'], '.2f')} | "
+            f"{r['left_out']} | {fmt(r['max_abs_z'], '.2f')} | {fmt(r['p_chi2'], '.3f')} | "
             f"{fmt(r['rms_over_floor'], '.2f')} | {r['window']} | {fmt(r['factor'], 'g')} | "
             f"{r['detect_s']:.2f} |"
         )

@@ -32,6 +32,19 @@ scatter) go to the most poses held, the fewest split, and the median threshold f
 classic setting is kept: a 1 s window (100 samples without a rate), factor 6, runs of at
 least one window.
 
+The moving variance of a short window hides a slow motion under the noise (two poses a few
+tens of degrees apart joined by a 2 s motion change the reading by less than the noise from one
+sample to the next), so the chosen setting's runs can reach past the trim into a motion, or
+span two poses. Each run is therefore tested as a whole, where all of its samples give the
+reference mean: for a ramp starting in its last (or first) window plus trim of samples (a
+constant, then a straight line: the start of a motion), and for a change of mean inside it
+(two poses joined by a quiet motion). The most significant (F statistic beyond ``RAMP_F``, or
+beyond ``RAMP_MEDIAN`` times the median over the runs when the noise is not white) is cut off
+or split at, and the pieces are tested again. A change of mean splits a run only when the two
+means lie ``SPLIT`` of the radius apart: a slow drift within one pose does not split it. Only
+the chosen setting is refined (the sweep scores the raw runs), and an explicit ``trim`` turns
+it off.
+
 Explicit ``window``, ``threshold_factor``, ``threshold``, ``min_duration`` / ``min_samples``
 and ``trim`` fix their dimension of the sweep; the rest is still chosen.
 
@@ -78,6 +91,12 @@ SCORE_TIE = 0.1
 # (split by a noise spike, or the settling just after the pose was taken): protocols move
 # further than that from one pose to the next
 SPLIT = 0.1
+# a ramp at a run's end (a slow motion starting) or a change of mean inside a run is cut off
+# when its F statistic exceeds this (about the 99.9th percentile of the largest of a run's
+# F values under white noise) or this many times the median over the runs (noise that is not
+# white inflates every run's F alike)
+RAMP_F = 12.0
+RAMP_MEDIAN = 5.0
 # longer logs are swept on every k-th sample (k = ceil(N / this)): the moving variance and
 # the runs cost O(N) per candidate, and two million samples hold any protocol's poses
 MAX_SWEEP_SAMPLES = 2_000_000
@@ -419,6 +438,100 @@ def _trimmed(
     return a[keep], b[keep], left_bad[keep]
 
 
+def _ramp_end(yc: np.ndarray, ss: float, span: int) -> tuple[float, int]:
+    """Largest F statistic of a ramp (the start of a slow motion) in the last ``span`` samples
+    of a run: yc the run's samples minus their mean (n, 3), ss their sum of squares. The model
+    is a constant, then a straight line from sample t0 on (a hinge); returns (F, t0). Under
+    white noise F ~ F(3, 3(n - 2)) at each t0."""
+    n = len(yc)
+    span = min(span, n - 3)
+    if span < 2:
+        return 0.0, n
+    z = yc[n - span :]
+    tau = np.arange(span, dtype=float)
+    rs = np.cumsum(z[::-1], axis=0)[::-1]
+    rts = np.cumsum((tau[:, None] * z)[::-1], axis=0)[::-1]
+    j = np.arange(span - 1)
+    num = rts[j] - j[:, None] * rs[j]  # sum over the ramp of (t - t0) * yc_t, per axis
+    k = (span - j).astype(float)  # samples from t0 to the end
+    sh = k * (k - 1) / 2.0
+    var_h = (k - 1) * k * (2 * k - 1) / 6.0 - sh * sh / n
+    gain = np.einsum("ij,ij->i", num, num) / var_h
+    f = gain * (n - 2) / np.maximum(ss - gain, 1e-300)
+    i = int(np.argmax(f))
+    return float(f[i]), n - span + i
+
+
+def _step(yc: np.ndarray, ss: float) -> tuple[float, int]:
+    """Largest F statistic of a change of mean inside a run (two poses in one run, joined by a
+    motion too slow for the moving variance): (F, k), the run split before sample k."""
+    n = len(yc)
+    c = np.cumsum(yc, axis=0)[:-1]
+    k = np.arange(1, n, dtype=float)
+    t = np.einsum("ij,ij->i", c, c) * n / (k * (n - k))
+    f = t * (n - 2) / np.maximum(ss - t, 1e-300)
+    f[:1] = f[-1:] = 0.0  # pieces of at least two samples
+    i = int(np.argmax(f))
+    return float(f[i]), i + 1
+
+
+def _refined(
+    x: np.ndarray, a: np.ndarray, b: np.ndarray, cut: np.ndarray, span: int, min_len: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Runs with the slow starts and ends of motions cut off, and runs holding two poses split
+    (module docstring). Each run is tested for a ramp at either end (the last or first
+    ``span`` samples) and for a change of mean inside; the most significant, if beyond
+    ``RAMP_F`` (or ``RAMP_MEDIAN`` times the median over the runs: correlated noise), is
+    applied and the pieces tested again. A change of mean splits a run only when the two
+    means lie ``SPLIT`` of the radius apart (two poses): a slow drift of one pose does not
+    split it. Pieces shorter than ``min_len`` are dropped."""
+    if len(a) == 0:
+        return a, b, cut
+    stats = []
+    for s, e in zip(a, b, strict=True):
+        y = x[s:e]
+        yc = y - y.mean(axis=0)
+        ss = float(np.sum(yc * yc))
+        stats.append(max(_ramp_end(yc, ss, span)[0], _ramp_end(yc[::-1], ss, span)[0]))
+    thr = max(RAMP_F, RAMP_MEDIAN * float(np.median(stats)))
+    means = np.array([x[s:e].mean(axis=0) for s, e in zip(a, b, strict=True)])
+    radius = float(np.median(np.linalg.norm(means - means.mean(axis=0), axis=1)))
+    out_a, out_b, out_c = [], [], []
+    todo = list(zip(a.tolist(), b.tolist(), cut.tolist(), strict=True))
+    while todo:
+        s, e, c = todo.pop()
+        if e - s < min_len:
+            continue
+        if e - s < 6:
+            out_a.append(s), out_b.append(e), out_c.append(c)
+            continue
+        y = x[s:e]
+        yc = y - y.mean(axis=0)
+        ss = float(np.sum(yc * yc))
+        f_end, t_end = _ramp_end(yc, ss, span)
+        f_start, t_start = _ramp_end(yc[::-1], ss, span)
+        f_step, k = _step(yc, ss)
+        if f_step > thr:
+            d = np.linalg.norm(y[:k].mean(axis=0) - y[k:].mean(axis=0))
+            if d < SPLIT * radius:
+                f_step = 0.0
+        best = max(f_end, f_start, f_step)
+        if best <= thr:
+            out_a.append(s), out_b.append(e), out_c.append(c)
+        elif best == f_step:
+            todo += [(s, s + k, c), (s + k, e, False)]
+        elif best == f_end:
+            todo.append((s, s + t_end, c))
+        else:
+            todo.append((e - t_start, e, c))
+    order = np.argsort(out_a)
+    return (
+        np.asarray(out_a, np.int64)[order],
+        np.asarray(out_b, np.int64)[order],
+        np.asarray(out_c, bool)[order],
+    )
+
+
 def _fibonacci_sphere(n: int = 412) -> np.ndarray:
     """n nearly uniform unit vectors (spacing ~ sqrt(4 pi / n) rad: 10 degrees for 412)."""
     i = np.arange(n) + 0.5
@@ -666,8 +779,8 @@ def detect_static(
         Samples allowed in intervals (False for non-finite or saturated samples).
     trim : int, optional
         Samples cut from each end of every run (a run left shorter than a quarter of
-        ``min_samples`` is dropped). Default: half a
-        window.
+        ``min_samples`` is dropped). Default: half a window, and the ramps at the ends of the
+        runs cut off (module docstring); an explicit trim fixes the edges.
     pose_table : bool, optional
         True: every row is a pose; False: never; default: recognised when there is no sample
         rate, no explicit window, threshold or minimum length, few rows and neighbouring rows
@@ -748,10 +861,12 @@ def detect_static(
         # first samples of a motion only once they have moved more than the noise
         return max(w // 2, int(round(MIN_TRIM_S * sample_rate)) if sample_rate else 0)
 
-    def run(w: int, f: float | None, mv: np.ndarray, noise: float):
+    def run(w: int, f: float | None, mv: np.ndarray, noise: float, refine: bool = False):
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
         starts, stops = _runs(mv <= thr if all_valid else (mv <= thr) & valid)
         a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
+        if refine:
+            a, b, cut = _refined(x, a, b, cut, w + trim_for(w), max(2, min_run_for(w) // 4))
         return float(thr), a, b, cut
 
     single = len(windows) * len(factors) == 1
@@ -807,7 +922,9 @@ def detect_static(
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
 
     mv = _moving_variance(c1, c2, cn, w)
-    thr, a, b, _ = run(w, f, mv, noise)
+    # the ramps at the ends of the chosen setting's runs are cut (an explicit trim fixes the
+    # edges: detect_rest, --trim)
+    thr, a, b, _ = run(w, f, mv, noise, refine=trim is None)
     rejected: list[tuple[int, int]] = []
     if how == "sweep":  # leave out the pauses in motion the score found off the ellipsoid
         _, _, off = ellipsoid_score((c1[b] - c1[a]) / (b - a)[:, None] + mu)
