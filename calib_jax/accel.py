@@ -301,7 +301,7 @@ def calibrate_accel(
         Static detection, see :func:`calib_jax.static.detect_static`. Left out, the detector
         chooses its window and threshold from the data (a sweep scored by a fit of the interval
         means) and recognises pose tables (one row per pose); what it chose is reported in
-        ``warnings`` (lines starting "static detection").
+        ``notes`` (lines starting "static detection"); ``warnings`` holds problems to act on.
     solver_options : dict, optional
         Passed to the solver (e.g. ``{"jacobian": "broyden", "rho_form": "paper"}``).
 
@@ -345,7 +345,8 @@ def calibrate_accel(
         min_duration=min_duration,
         min_samples=min_samples,
     )
-    warn: list[str] = log_notes + obs.notes
+    warn: list[str] = list(obs.warnings)
+    notes: list[str] = log_notes + obs.notes
     report, means, pts = obs.report, obs.means, obs.points
 
     c_s, r_s = check_poses(obs, model, sample_rate)
@@ -481,6 +482,7 @@ def calibrate_accel(
         noise_floor=floor,
         poorly_determined=poor,
         warnings=warn,
+        notes=notes,
         static_means=means,
         nominal_offset=offset,
         nominal_scale=scale,

@@ -59,6 +59,10 @@ class AccelCalibration:
     noise_floor: float
     poorly_determined: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    """Problems a user should act on (rows left out, saturation, coverage, conditioning)."""
+    notes: list[str] = field(default_factory=list)
+    """What the way in found and chose: how the file was read, the static detector's setting
+    and why (calib_jax.observations)."""
     static_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     """Raw means of the static intervals (n_intervals, 3), input units."""
     nominal_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -133,6 +137,7 @@ class AccelCalibration:
         ]
         if self.poorly_determined:
             out.append("poorly determined: " + ", ".join(self.poorly_determined))
+        out += [f"note: {n}" for n in self.notes]
         out += [f"warning: {w}" for w in self.warnings]
         return "\n".join(out)
 
@@ -165,6 +170,7 @@ class AccelCalibration:
             "noise_floor": self.noise_floor,
             "poorly_determined": list(self.poorly_determined),
             "warnings": list(self.warnings),
+            "notes": list(self.notes),
             "static_means": np.asarray(self.static_means).tolist(),
             "nominal": {
                 "offset": np.asarray(self.nominal_offset).tolist(),
@@ -230,6 +236,7 @@ class AccelCalibration:
             noise_floor=r.num("noise_floor", finite=False),
             poorly_determined=r.strings("poorly_determined"),
             warnings=r.strings("warnings"),
+            notes=r.strings("notes"),
             static_means=r.arr("static_means", (-1, 3), default=[], finite=False),
             nominal_offset=r.arr("nominal.offset", (3,), default=[0.0, 0.0, 0.0]),
             nominal_scale=r.num("nominal.scale", default=1.0, positive=True),
@@ -521,6 +528,9 @@ class MagCalibration:
     """Per candidate model: BIC and RMS radial error (percent of the RMS data radius)."""
     poorly_determined: list[str] = _field(default_factory=list)
     warnings: list[str] = _field(default_factory=list)
+    """Problems a user should act on (rows left out, saturation, coverage, plausibility)."""
+    notes: list[str] = _field(default_factory=list)
+    """What the way in found and chose (how the file was read)."""
     sensor_id: str | None = None
     date: str = _field(
         default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
@@ -578,6 +588,7 @@ class MagCalibration:
                     for m, v in self.model_selection.items()
                 )
             )
+        out += [f"note: {n}" for n in self.notes]
         out += [f"warning: {w}" for w in self.warnings]
         return "\n".join(out)
 
@@ -616,6 +627,7 @@ class MagCalibration:
                 "model_selection": self.model_selection,
                 "poorly_determined": list(self.poorly_determined),
                 "warnings": list(self.warnings),
+                "notes": list(self.notes),
             }
         )
 
@@ -670,6 +682,7 @@ class MagCalibration:
             model_selection=_unsanitize(ms),
             poorly_determined=r.strings("poorly_determined"),
             warnings=r.strings("warnings"),
+            notes=r.strings("notes"),
             sensor_id=r.text("sensor_id", optional=True),
             date=r.text("date"),
             source=r.text("source", optional=True),

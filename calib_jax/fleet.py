@@ -61,7 +61,7 @@ def prepare_log(
     obs = accel_observations(x, use=use, sample_rate=log.sample_rate, **detector)
     check_poses(obs, model or "accel9", log.sample_rate)
     info.update(
-        notes=list(log.notes) + obs.notes,
+        notes=list(log.notes) + obs.warnings + obs.notes,
         static_intervals=obs.report.n_intervals,
         use=use,
         static_norm=obs.static_norm,

@@ -241,13 +241,14 @@ def calibrate_mag(
     """
     source = None
     warn: list[str] = []
+    notes: list[str] = []
     if isinstance(data, SensorLog):
         x = data.mag if sensor == "mag" else data.acc
         if x is None:
             cols = "mx, my, mz" if sensor == "mag" else "ax, ay, az"
             raise ValueError(f"{data.path}: no {sensor} columns ({cols}); map them with --columns")
         source = data.path
-        warn += list(data.notes)
+        notes += list(data.notes)
         x = np.asarray(x, float)
     else:
         x = np.asarray(data, float)
@@ -442,6 +443,7 @@ def calibrate_mag(
         model_selection=selection,
         poorly_determined=poor,
         warnings=warn,
+        notes=notes,
         sensor_id=sensor_id,
         source=source,
     )

@@ -87,8 +87,10 @@ class AccelObservations:
     valid: np.ndarray
     """(N,) bool: samples that are finite and not on a saturated axis."""
     use: str
+    warnings: list[str] = field(default_factory=list)
+    """Samples left out by screening (non-finite rows, a saturated axis), with the remedy."""
     notes: list[str] = field(default_factory=list)
-    """Screening and detection notes, in the order a user should read them."""
+    """What the detector found and chose (:meth:`calib_jax.static.StaticReport.notes`)."""
 
     @property
     def static_norm(self) -> float:
@@ -114,9 +116,9 @@ def accel_observations(
         raise ValueError(f"accelerometer data must be (samples, 3), got shape {x.shape}")
     if use not in USES:
         raise ValueError(f"use must be 'means' or 'samples', got {use!r}")
-    valid, notes = screen_samples(x, "accel")
+    valid, warnings = screen_samples(x, "accel")
     report = detect_static(x, sample_rate=sample_rate, valid=valid, **detector)
-    notes += report.notes(sample_rate)
+    notes = report.notes(sample_rate)
     if report.n_intervals == 0:
         raise ValueError(
             "static detection found no static interval: "
@@ -127,7 +129,13 @@ def accel_observations(
     means = report.means()
     points = means if use == "means" else x[report.mask]
     return AccelObservations(
-        points=points, means=means, report=report, valid=valid, use=use, notes=notes
+        points=points,
+        means=means,
+        report=report,
+        valid=valid,
+        use=use,
+        warnings=warnings,
+        notes=notes,
     )
 
 

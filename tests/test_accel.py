@@ -95,6 +95,13 @@ def test_json_roundtrip_and_apply(tmp_path):
     np.testing.assert_array_equal(back.params, cal.params)
     np.testing.assert_array_equal(back.stderr, cal.stderr)
     assert back.sensor_id == "unit-7" and back.status == cal.status
+    # what the detector chose is a note, kept in the file; a file written before notes
+    # existed (no "notes" key) still loads
+    assert back.notes == cal.notes and any(n.startswith("static detection") for n in d["notes"])
+    assert not any(w.startswith("static detection") for w in cal.warnings)
+    old = {k: v for k, v in d.items() if k != "notes"}
+    path.with_suffix(".old.json").write_text(json.dumps(old))
+    assert cj.AccelCalibration.load(path.with_suffix(".old.json")).notes == []
     a = back.apply(log.raw[log.static])
     err = np.abs(np.linalg.norm(a, axis=1) - 1.0)
     assert np.median(err) < 5e-3  # per-sample noise is 2 mg

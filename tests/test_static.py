@@ -135,7 +135,7 @@ def test_pose_table_is_fitted_directly(tol):
     assert rep.kind == "pose_table" and rep.n_intervals == 178
     cal = cj.calibrate_accel(table)
     assert cal.input_units == "g" and cal.n_intervals == 178
-    assert any("pose table: 178 rows, each row taken as one pose" in w for w in cal.warnings)
+    assert any("pose table: 178 rows, each row taken as one pose" in w for w in cal.notes)
     z = (cal.params - p) / cal.stderr
     assert np.all(np.abs(z) < tol.N_SIGMA), z
     # a time series is never a pose table (neighbouring samples sit at the noise level)
@@ -197,7 +197,7 @@ def test_one_second_poses_through_calibrate_accel(one_second_log, tol):
     assert "static detection: window" in text and "chosen by fit score" in text
     assert "static detection candidates" in text
     d = json.loads(json.dumps(cal.to_dict()))
-    assert any(w.startswith("static detection: window") for w in d["warnings"])
+    assert any(w.startswith("static detection: window") for w in d["notes"])
 
 
 def test_one_second_poses_through_the_diagnosis(one_second_log):
