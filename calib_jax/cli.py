@@ -324,6 +324,7 @@ def run_batch(args: argparse.Namespace) -> int:
         )
     out = open(args.json, "w") if args.json else None  # noqa: SIM115
     n_ok = n_all = 0
+    not_ok = []
     try:
         if out:
             head = json.dumps({"format_version": 1, "sensor": args.sensor})[:-1]
@@ -335,11 +336,16 @@ def run_batch(args: argparse.Namespace) -> int:
                 out.flush()
             n_all += 1
             n_ok += r["status"] == "ok"
+            if r["status"] != "ok":
+                not_ok.append(f"{r['path']}: {r['status']}: {r.get('message', '')}")
         if out:
             out.write("\n]}\n")
     finally:
         if out:
             out.close()
+    # after the progress line: why each file was not calibrated, without opening the JSON
+    for line in not_ok:
+        print(line)
     print(f"{n_ok} of {n_all} calibrated" + (f"; wrote {args.json}" if args.json else ""))
     return 0 if n_ok == n_all else 1
 

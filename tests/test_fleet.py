@@ -130,7 +130,10 @@ def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert doc["format_version"] == 1 and len(doc["results"]) == 6
     assert sum(r["status"] == "ok" for r in doc["results"]) == 5
-    assert "5 of 6 calibrated" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "5 of 6 calibrated" in printed
+    # the file that failed is named on the terminal with its reason
+    assert any("broken.csv: load_error: " in line for line in printed.splitlines())
 
 
 def test_batch_cli_bad_directory(tmp_path, capsys):
