@@ -140,15 +140,11 @@ def _fit_chunk(
     paths: list[str], sensor: str, columns: str | None, options: dict, use: str = "means"
 ) -> list[dict]:
     """Prepare and fit one chunk of files (also the Dask task)."""
-    options = dict(options)
-    prep_opts = {"model": options.get("model")} if sensor == "accel" else {}
-    if sensor == "accel":
-        prep_opts["use"] = use
     prepared, out = [], []
     for p in paths:
         try:
             log = load_log(p, columns=columns, sensor=sensor)
-            pts, info = prepare_log(log, sensor, **prep_opts)
+            pts, info = prepare_log(log, sensor, model=options.get("model"), use=use)
             prepared.append((p, pts, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
             # ValueError/OSError carry a message meant for the user; anything else is a bug in
