@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .static import StaticReport, detect_static
+from .static import SPHERE_RMS, StaticReport, detect_static
 
 USES = ("means", "samples")
 
@@ -144,9 +144,17 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
     if report.kind == "pose_table":
         return report.setting(sample_rate)
     tried = len(report.candidates)
-    most = max((c.n_poses for c in report.candidates), default=0)
+    # a setting whose means scatter off every ellipsoid found noise, not poses: its count of
+    # directions about the fitted centre means nothing (a board that never moved has dozens)
+    on_sphere = [c for c in report.candidates if not c.rms > SPHERE_RMS]
+    most = max((c.n_poses for c in on_sphere), default=0)
     setting = report.setting(sample_rate).removeprefix("static detection: ")
     found = f"found {report.n_intervals} static intervals with {setting}"
     if tried > 1:
         found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
+    if tried > 1 and not any(c.n_poses for c in on_sphere) and len(on_sphere) < tried:
+        found += (
+            f" (no setting's interval means lay on one ellipsoid within {100 * SPHERE_RMS:g} % "
+            "of its radius: the log looks like one pose held throughout, or motion throughout)"
+        )
     return found

@@ -105,6 +105,12 @@ POSE_TABLE_MAX_ROWS = 10_000
 POSE_TABLE_STEP = 0.1
 """Rows are poses when their 25th-percentile neighbour distance exceeds this fraction of the
 data's rms radius (a time series at rest has neighbour distances at the noise level)."""
+SPHERE_RMS = 0.05
+"""Points lie on one ellipsoid when the algebraic ellipsoid fit leaves a dof-corrected radial
+rms below this fraction of its radius (poses: 1e-3 to 1e-2). The noise of one pose fills a
+blob, not a shell (rms 0.4-0.5): a board that never moved, read in integer counts, has
+neighbour steps of a whole count against a radius under one count and would otherwise pass
+the step test of a pose table."""
 
 
 @dataclass(frozen=True)
@@ -618,7 +624,8 @@ def _count_directions(d: np.ndarray, min_angle_deg: float = 10.0) -> int:
 
 
 def looks_like_pose_table(x: np.ndarray) -> bool:
-    """True for few rows that lie far apart from their neighbours (module docstring)."""
+    """True for few rows that lie far apart from their neighbours and on one ellipsoid
+    (module docstring)."""
     x = np.asarray(x, float)
     n = len(x)
     if n < N_PARAMS + 1 or n > POSE_TABLE_MAX_ROWS:
@@ -627,7 +634,9 @@ def looks_like_pose_table(x: np.ndarray) -> bool:
     if not np.isfinite(spread) or spread <= 0:
         return False
     step = np.linalg.norm(np.diff(x, axis=0), axis=1)
-    return bool(np.percentile(step, 25) > POSE_TABLE_STEP * spread)
+    if not np.percentile(step, 25) > POSE_TABLE_STEP * spread:
+        return False
+    return bool(ellipsoid_score(x)[0] <= SPHERE_RMS)  # NaN (no ellipsoid) is not a table
 
 
 def _window_grid(n: int, sample_rate: float | None) -> list[int]:

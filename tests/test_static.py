@@ -239,3 +239,21 @@ def test_interleaved_empty_rows_do_not_cut_every_pose():
     np.testing.assert_allclose(rep.means(), clean.means())
     assert not rep.mask[~valid].any()
     assert any("interleaved" in n for n in rep.notes(100.0))
+
+
+def test_board_that_never_moved_is_not_a_pose_table():
+    """Integer counts of one pose: neighbour steps of a whole count against a spread under one
+    count pass the step test of a pose table, but the rows fill a blob, not an ellipsoid
+    shell. The error must say one pose, not 'pose table' and not dozens of poses (the
+    directions of noise about an ellipsoid fitted to noise)."""
+    rng = np.random.default_rng(3)
+    flat = np.round(np.array([12.0, -30.0, 1000.0]) + rng.normal(0, 0.7, (300, 3)))
+    assert not looks_like_pose_table(flat)
+    with pytest.raises(ValueError, match="only 1 distinct poses") as e:
+        cj.calibrate_accel(flat)
+    msg = str(e.value)
+    assert "pose table" not in msg
+    assert "the most distinct poses any found was 0" in msg and "one pose held" in msg
+    # an ADC's offset (analog sensor, 512 counts at 0 g, 100 counts per g) is still a table
+    adc = np.round(512 + 100 * random_directions(50, 2))
+    assert looks_like_pose_table(adc)
