@@ -56,7 +56,7 @@ from .attitude import gauss_newton_quaternion, reference_vectors
 from .implicit import solve_implicit
 from .lm.status import CONVERGED_STATUSES, Status
 from .mag import ellipsoid_start
-from .models.accel import AccelParams, alpha_matrix, correct
+from .models.accel import AccelParams, alpha_matrix, normalized_sphere_residual
 from .models.mag import sqrtm_spd, unpack
 from .rotations import euler_zyx_deg, rotvec_to_dcm
 
@@ -212,12 +212,12 @@ def _normalisation(raw, w):
 
 
 def _accel_residual(p, args):
-    # |a| / g - 1 (the relative form of :func:`residual`), not paper 1's 1 - |a|^2 / g^2: the
-    # same minimiser to second order, and a residual whose sigma is that of |a| / g, so that
-    # weights 1 / sigma^2 mean the same thing in fit_accel and fit_mag
+    # paper 1's eq. 6 over g^2, the residual of calibrate_accel and of the batch's moment form
+    # (one minimiser on every path), halved: (1 - |a|^2 / g^2) / 2 = 1 - |a| / g to first
+    # order, so its sigma is that of |a| / g and weights 1 / sigma^2 mean the same thing in
+    # fit_accel and fit_mag
     x, _, g = args
-    a = correct(p, x) / g
-    return jnp.sqrt(jnp.sum(a * a, axis=-1)) - 1.0
+    return 0.5 * normalized_sphere_residual(p, x, g)
 
 
 def _mag_residual(p, args):
@@ -295,7 +295,9 @@ def fit_accel(
     absolute_sigma: bool = False,
 ) -> Fit:
     """Paper 1's nine-parameter fit of one accelerometer (static samples or interval means):
-    minimise sum w (|a| / g - 1)^2, a = alpha^-1 (a' - beta), from the algebraic ellipsoid.
+    minimise sum w (1 - |a|^2 / g^2)^2 / 4, a = alpha^-1 (a' - beta), from the algebraic
+    ellipsoid: the residual of :func:`calib_jax.calibrate_accel` and of the batch, so the
+    same points give the same parameters on every path.
 
     Parameters
     ----------
