@@ -53,7 +53,9 @@ code(
     """
 import jax
 
-jax.config.update("jax_enable_x64", True)  # calibration needs float64
+from calib_jax.runtime import configure
+
+configure()  # float64, and compiled fits kept on disk for the next kernel (runtime.py)
 import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np

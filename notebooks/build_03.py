@@ -52,9 +52,9 @@ code(
     """
 import io
 
-import jax
+from calib_jax.runtime import configure
 
-jax.config.update("jax_enable_x64", True)  # calibration needs float64
+configure()  # float64, and compiled fits kept on disk for the next kernel (runtime.py)
 import numpy as np
 from IPython.display import Image, Markdown, display
 from scipy import stats

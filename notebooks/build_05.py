@@ -45,7 +45,9 @@ import os
 
 import jax
 
-jax.config.update("jax_enable_x64", True)  # calibration runs in float64
+from calib_jax.runtime import configure
+
+configure()  # float64, and compiled fits kept on disk for the next kernel (runtime.py)
 import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
