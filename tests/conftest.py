@@ -4,15 +4,20 @@ from __future__ import annotations
 
 import gc
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import jax
 
-# One fresh persistent compilation cache for the whole run (and the CLI subprocesses it
-# starts): functions compiled by one module are reloaded from disk by the next after
-# jax.clear_caches(), and the user's own cache is never touched by the tests.
-os.environ.setdefault("CALIB_JAX_CACHE_DIR", tempfile.mkdtemp(prefix="calib_jax_test_cache_"))
+# One fresh persistent compilation cache for the whole run, inherited by its xdist workers and
+# the CLI subprocesses and notebook kernels they start: a function compiled by one module or
+# worker is reloaded from disk by the next (after jax.clear_caches() too), and the user's own
+# cache is never touched by the tests. The process that made it removes it at the end (a full
+# run leaves about 50 MB).
+_OWN_CACHE = None
+if "CALIB_JAX_CACHE_DIR" not in os.environ:
+    _OWN_CACHE = os.environ["CALIB_JAX_CACHE_DIR"] = tempfile.mkdtemp(prefix="calib_jax_test_")
 from calib_jax.runtime import configure  # noqa: E402
 
 configure()
@@ -79,6 +84,11 @@ def _release_compiled_code():
         _PEAK_MAPS[0] = max(_PEAK_MAPS[0], n)
     jax.clear_caches()
     gc.collect()
+
+
+def pytest_unconfigure(config):
+    if _OWN_CACHE is not None:
+        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
 
 
 def pytest_terminal_summary(terminalreporter):
