@@ -19,7 +19,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .models.accel import PARAM_NAMES, AccelParams
+from .models.accel import ALPHA_INDEX, PARAM_NAMES, AccelParams
 
 FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
@@ -207,7 +207,7 @@ class AccelCalibration:
             raise ValueError(
                 f"{r.where}key 'params.gains[{i}]' is 0: a zero gain cannot be inverted"
             )
-        alpha = np.asarray(AccelParams.from_vector(jnp.asarray(params)).alpha)
+        alpha = params[ALPHA_INDEX]
         if not np.linalg.cond(alpha) < 1e12:
             raise ValueError(
                 f"{r.where}keys 'params.gains'/'params.nonorth' give a singular gain matrix "
@@ -261,8 +261,8 @@ def split_params(p: np.ndarray) -> dict:
 def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:
     """a = alpha^-1 (raw - beta) in host-side numpy (no per-shape compilation; inside JAX use
     ``models.accel.correct``)."""
-    alpha = np.asarray(AccelParams.from_vector(jnp.asarray(params)).alpha)
-    return (raw - params[6:9]) @ np.linalg.inv(alpha).T
+    params = np.asarray(params)
+    return (raw - params[6:9]) @ np.linalg.inv(params[ALPHA_INDEX]).T
 
 
 class _Token:

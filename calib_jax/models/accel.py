@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ..linalg import inv3
@@ -71,16 +72,14 @@ class AccelParams(eqx.Module):
         return cls(gains=jnp.ones(3, dtype), nonorth=jnp.zeros(3, dtype), bias=jnp.zeros(3, dtype))
 
 
+ALPHA_INDEX = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
+"""Where alpha's entries sit in paper 1's vector [ax, ay, az, Sxy, Sxz, Syz, bx, by, bz]
+(alpha is symmetric): ``p[ALPHA_INDEX]`` is alpha, in JAX or, on the host, in numpy."""
+
+
 def alpha_matrix(p: Float[Array, "9"]) -> Float[Array, "3 3"]:
     """alpha from the parameter vector (symmetric, paper 1 eq. 1)."""
-    ax, ay, az, sxy, sxz, syz = p[0], p[1], p[2], p[3], p[4], p[5]
-    return jnp.stack(
-        [
-            jnp.stack([ax, sxy, sxz]),
-            jnp.stack([sxy, ay, syz]),
-            jnp.stack([sxz, syz, az]),
-        ]
-    )
+    return jnp.asarray(p)[ALPHA_INDEX]
 
 
 def correct(p: Float[Array, "9"], raw: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
