@@ -91,8 +91,8 @@ def main() -> None:
             "target_cold_s": cold_target,
         }
         if anchor is not None:
-            a = [timed([*anchor, f"{work}/{name}-scipy.json"], base, work)[0]]
-            a += [timed([*anchor, f"{work}/{name}-scipy.json"], base, work)[0]]
+            out_json = f"{work}/{name}-scipy.json"
+            a = [timed([*anchor, out_json], base, work)[0] for _ in range(args.repeats)]
             row["scipy_s"] = statistics.median(a)
             row["warm_over_scipy"] = row["warm_s"] / row["scipy_s"]
         rows[name] = row
