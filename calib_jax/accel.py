@@ -38,6 +38,7 @@ from .geometry import (
     sphere_fit_moments,
     sqrtm_inv_spd,
 )
+from .implicit import solve_implicit
 from .io.files import SensorLog
 from .lm import LMResult, fit_status, lm_solve, optx_solve, status_message
 from .models.accel import PARAM_NAMES, normalized_sphere_residual
@@ -92,11 +93,6 @@ def initial_guess_moments(S: jax.Array) -> jax.Array:
     return jnp.where(use_ell, p_ell, p_sph)
 
 
-def _residual(p, data):
-    x, _ = data
-    return normalized_sphere_residual(p, x, 1.0)
-
-
 MODELS = {
     "accel9": (True,) * 9,
     # the six-element model (gains and biases, alpha diagonal): all that six-face data such as
@@ -106,30 +102,54 @@ MODELS = {
 
 
 def fit_normalized(
-    x: jax.Array, w: jax.Array, solver: str = "lm1", model: str = "accel9", **options
+    x: jax.Array,
+    w: jax.Array,
+    solver: str = "lm1",
+    model: str = "accel9",
+    g: float | jax.Array = 1.0,
+    implicit: bool = False,
+    **options,
 ) -> LMResult:
-    """Pure core: fit paper 1's model to unit-radius data x (N, 3) with weights w (N,).
+    """Pure core: fit paper 1's model to data x (N, 3) of radius about ``g`` with weights w (N,).
 
-    Jittable and vmappable over sensors. ``solver``, ``model`` and ``options`` are static.
-    For ``model="accel6"`` the non-orthogonality terms are held at zero; the result still
-    has nine entries (zero standard error and covariance for the fixed ones).
+    The one accelerometer fit: :func:`calibrate_accel` calls it on unit-radius interval means,
+    :func:`calib_jax.pipeline.fit_accel` with ``implicit=True``. The residual is
+    :func:`calib_jax.models.accel.normalized_sphere_residual`, 1 - |a|^2 / g^2, and the start
+    the algebraic ellipsoid (:func:`calib_jax.geometry.initial_guess`) scaled to radius g.
+    Jittable and vmappable over sensors. ``solver``, ``model``, ``implicit`` and ``options``
+    are static. For ``model="accel6"`` the non-orthogonality terms are held at zero; the result
+    still has nine entries (zero standard error and covariance for the fixed ones).
+    ``implicit=True`` (LM solvers only): ``params`` are differentiable in x, w and g by the
+    implicit function theorem (:func:`calib_jax.implicit.solve_implicit`).
     """
     free = np.asarray(MODELS[model])
     idx = np.flatnonzero(free)
     p0 = initial_guess(x, w)
+    p0 = jnp.concatenate([p0[:6] / g, p0[6:]])  # the algebraic start is for |a| = 1
     p0 = jnp.where(jnp.asarray(free), p0, 0.0)
 
     def embed(q):
         return jnp.zeros(9, q.dtype).at[idx].set(q)
 
     def residual(q, data):
-        return _residual(embed(q), data)
+        x, _, g = data
+        return normalized_sphere_residual(embed(q), x, g)
 
+    data = (x, w, g)
     if solver == "optimistix":
-        res = optx_solve(residual, p0[idx], (x, w), weights=w, **options)
+        if implicit:
+            raise ValueError("implicit=True needs an LM solver (lm1, lm2, lm3)")
+        res = optx_solve(residual, p0[idx], data, weights=w, **options)
     else:
         update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
-        res = lm_solve(residual, p0[idx], (x, w), weights=w, update_type=update_type, **options)
+        if implicit:
+            q, res = solve_implicit(
+                residual, p0[idx], data, weights=lambda d: d[1], update_type=update_type,
+                **options,
+            )  # fmt: skip
+            res = eqx.tree_at(lambda r: r.params, res, q)
+        else:
+            res = lm_solve(residual, p0[idx], data, weights=w, update_type=update_type, **options)
     if len(idx) == 9:
         return res
     full = np.zeros((9, len(idx)))

@@ -51,12 +51,12 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float, Int
 
-from .accel import initial_guess
+from .accel import fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
 from .implicit import solve_implicit
 from .lm.status import CONVERGED_STATUSES, Status
 from .mag import ellipsoid_start
-from .models.accel import AccelParams, alpha_matrix, normalized_sphere_residual
+from .models.accel import AccelParams, alpha_matrix
 from .models.mag import sqrtm_spd, unpack
 from .rotations import euler_zyx_deg, rotvec_to_dcm
 
@@ -211,15 +211,6 @@ def _normalisation(raw, w):
     return jax.lax.stop_gradient(m), jax.lax.stop_gradient(s)
 
 
-def _accel_residual(p, args):
-    # paper 1's eq. 6 over g^2, the residual of calibrate_accel and of the batch's moment form
-    # (one minimiser on every path), halved: (1 - |a|^2 / g^2) / 2 = 1 - |a| / g to first
-    # order, so its sigma is that of |a| / g and weights 1 / sigma^2 mean the same thing in
-    # fit_accel and fit_mag
-    x, _, g = args
-    return 0.5 * normalized_sphere_residual(p, x, g)
-
-
 def _mag_residual(p, args):
     x, _, field = args
     y = (x - p[6:9]) @ _sym(p[:6]).T
@@ -322,17 +313,19 @@ def fit_accel(
     g_ok = _magnitude_ok(g)
     m, s = _normalisation(raw, w)
     x = (raw - m) / s
-    p0 = initial_guess(x, w)
-    p0 = jnp.concatenate([p0[:6] / g, p0[6:]])  # the start is for |a| = 1
-    pn, res = solve_implicit(
-        _accel_residual,
-        p0,
-        (x, w, g),
-        weights=_weights,
-        update_type=update_type,
+    # calibrate_accel's fit (one minimiser on every path). Its residual 1 - |a|^2 / g^2 is
+    # twice 1 - |a| / g to first order: weights w / 4 (exact in binary) keep w meaning
+    # 1 / sigma^2 of |a| / g, as in fit_mag
+    res = fit_normalized(
+        x,
+        w / 4.0,
+        solver=f"lm{update_type}",
+        g=g,
+        implicit=True,
         max_iter=max_iter,
         absolute_sigma=absolute_sigma,
     )
+    pn = res.params
     # back to raw units: alpha = s alpha_n, beta = s beta_n + m (exact for the model)
     p = jnp.concatenate([s * pn[:6], s * pn[6:] + m])
     params = AccelParams.from_vector(p)
