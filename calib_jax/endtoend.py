@@ -30,6 +30,7 @@ import numpy as np
 
 from .align import align_mag_to_accel
 from .lm import LMResult, lm_solve
+from .padding import bucket, pad_rows
 from .pipeline import (
     MagParams,
     MargParams,
@@ -139,6 +140,9 @@ class TwoStage:
     the rotation vector; for :func:`calib_jax.pipeline.attitude_std`."""
 
 
+_fit_mag_jit = jax.jit(fit_mag)
+
+
 def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
     """Fit the magnetometer ellipsoid (:func:`calib_jax.pipeline.fit_mag`, unit field), then
     the accel-mag rotation and dip by the angle constancy (:func:`calib_jax.align_mag_to_accel`).
@@ -146,9 +150,10 @@ def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
     acc = np.asarray(acc, float)
     mag = np.asarray(mag, float)
     ok = np.all(np.isfinite(mag), axis=1)  # NaN rows: zero weight and a finite stand-in
-    fit = jax.jit(fit_mag)(
-        jnp.asarray(np.where(ok[:, None], mag, 0.0)), 1.0, jnp.asarray(ok, float)
-    )
+    # padded to a power of two (weight 0): one compilation serves trials of similar length
+    stand_in, w = pad_rows(np.where(ok[:, None], mag, 0.0))
+    w[: len(ok)] = ok
+    fit = _fit_mag_jit(jnp.asarray(stand_in), 1.0, jnp.asarray(w))
     m = np.asarray(fit.params.apply(jnp.asarray(mag)))  # NaN rows stay NaN; align drops them
     al = align_mag_to_accel(acc, m, search_permutations=False)
     rot = Rotation(jnp.asarray(_rotvec(al.R_acc_from_mag)))
@@ -209,6 +214,10 @@ def end_to_end(
     mag = np.where(ok[:, None], mag, np.array([0.0, 1.0, 0.0]))
     if ok.sum() < 50:
         raise ValueError(f"only {int(ok.sum())} samples have a finite reference attitude")
+    # padded to a power of two with weight 0: trials of similar length share one compilation
+    size = bucket(len(w))
+    acc, mag, q_ref = (pad_rows(a, size)[0] for a in (acc, mag, q_ref))
+    w = np.concatenate([w, np.zeros(size - len(w))])
     fitted = tuple(
         name
         for name, on in (("calibration", fit_calibration), ("dip", fit_dip), ("offset", fit_offset))
