@@ -16,10 +16,9 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 
-from .models.accel import ALPHA_INDEX, PARAM_NAMES, AccelParams
+from .models.layout import ALPHA_INDEX, PARAM_NAMES
 
 FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
@@ -94,8 +93,13 @@ class AccelCalibration:
     def bias(self) -> np.ndarray:
         return self.params[6:9]
 
-    def to_params(self) -> AccelParams:
-        """The parameters as a JAX pytree, for use inside jitted pipelines."""
+    def to_params(self):
+        """The parameters as a JAX pytree (:class:`calib_jax.models.accel.AccelParams`), for
+        use inside jitted pipelines (JAX is imported here, not when a file is read)."""
+        import jax.numpy as jnp
+
+        from .models.accel import AccelParams
+
         return AccelParams.from_vector(jnp.asarray(self.params))
 
     def apply(self, raw) -> np.ndarray:

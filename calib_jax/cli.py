@@ -1,5 +1,6 @@
 """Command line: ``calib-jax accel|mag|marg|diagnose FILE``, ``calib-jax batch DIR``,
-``calib-jax record`` and ``calib-jax demo``.
+``calib-jax record``, ``calib-jax apply CAL LOG``, ``calib-jax export CAL`` and
+``calib-jax demo``.
 
 Exit codes: 0 calibrated; 1 the fit ran but did not converge (or is not to be trusted);
 2 the input or an option cannot give a calibration (``error: ...`` says which and what to
@@ -428,6 +429,46 @@ def run_marg(args: argparse.Namespace) -> int:
     return 0 if rec.success else 1
 
 
+def run_apply(args: argparse.Namespace) -> int:
+    from .apply import apply_calibration
+    from .export import read
+
+    corr = read(args.calibration, sensor=args.sensor)
+    log = Path(args.file)
+    if log.is_dir() or not log.exists():
+        raise ValueError(f"{log} {'is a directory' if log.is_dir() else 'does not exist'}")
+    out = args.out or str(log.with_name(log.stem + ".calibrated.csv"))
+    _writable_parent(out, "--out")
+    try:
+        rep = apply_calibration(
+            corr,
+            args.file,
+            out,
+            columns=args.columns,
+            sample_rate=args.sample_rate,
+            chunk_rows=args.chunk_rows,
+        )
+    except (UnicodeError, OSError) as exc:
+        raise _unreadable(args.file, f"cannot read it: {exc}") from exc
+    print(f"calib-jax apply: {args.calibration} -> {args.file}")
+    print(rep.report())
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from . import export
+
+    text = export.write(
+        export.read(args.calibration), args.format, sensor=args.sensor, name=args.name
+    )
+    if args.out in (None, "-"):
+        sys.stdout.write(text)
+    else:
+        Path(args.out).write_text(text)
+        print(f"wrote {args.out} ({args.format})")
+    return 0
+
+
 def run_record(args: argparse.Namespace) -> int:
     _enable_x64()
     from .record import run
@@ -617,6 +658,48 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--solver", default="lm1", choices=_SOLVERS)
     r.set_defaults(func=run_record, output_files=(("out", "--out"),))
 
+    ap = sub.add_parser(
+        "apply",
+        help="apply a saved calibration to a log (streamed) and write the corrected CSV",
+        description="Correct the accelerometer and magnetometer columns of LOG with the "
+        "calibration in CAL (calib_jax's accel, mag or marg JSON, or an imu_tk, imucal or "
+        "imu_calib file) and write t, the corrected columns and the others unchanged as CSV. "
+        "A plain text log is streamed in chunks (memory does not grow with its length).",
+    )
+    ap.add_argument("calibration", metavar="CAL", help="the saved calibration")
+    ap.add_argument("file", metavar="LOG", help="the log to correct")
+    ap.add_argument("--out", default=None, help="output CSV (default: LOG.calibrated.csv)")
+    ap.add_argument("--columns", default=None, help="column mapping, as for calib-jax accel")
+    ap.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
+    ap.add_argument(
+        "--sensor",
+        default=None,
+        choices=["accel", "mag"],
+        help="which sensor an imu_tk file holds (its text does not say; default accel)",
+    )
+    ap.add_argument("--chunk-rows", type=_pos_int, default=262_144, help="lines per chunk")
+    ap.set_defaults(func=run_apply, output_files=(("out", "--out"),))
+
+    ex = sub.add_parser(
+        "export",
+        help="write a saved calibration for firmware (C header), imu_tk, imucal or ROS",
+        description="Write CAL in another tool's format: 'c' (a C header: float constants and "
+        "an inline correction function), 'imu_tk' (CalibratedTriad_ text: T, K, B), 'imucal' "
+        "(FerrarisCalibrationInfo JSON; accelerometer only) or 'ros' (imu_calib's YAML: SM, "
+        "bias). Every format holds the same correction x = C (raw - b).",
+    )
+    ex.add_argument("calibration", metavar="CAL", help="the saved calibration (JSON)")
+    ex.add_argument("--format", required=True, choices=["c", "imu_tk", "imucal", "ros"])
+    ex.add_argument("--out", default=None, help="output file (default: standard output)")
+    ex.add_argument(
+        "--sensor",
+        default=None,
+        choices=["accel", "mag"],
+        help="the triad to write, for single-triad formats and a MARG calibration",
+    )
+    ex.add_argument("--name", default="calib", help="prefix of the C header's identifiers")
+    ex.set_defaults(func=run_export, output_files=(("out", "--out"),))
+
     _add_diagnose_parser(sub)
     return p
 
@@ -680,7 +763,8 @@ def _error_text(exc: BaseException, args: argparse.Namespace) -> str:
     else:
         msg = str(exc) or type(exc).__name__
     where = getattr(args, "file", None) or getattr(args, "dir", None)
-    if where and not isinstance(exc, _OutputError) and str(where) not in msg:
+    named = [str(w) for w in (where, getattr(args, "calibration", None)) if w]
+    if where and not isinstance(exc, _OutputError) and not any(w in msg for w in named):
         msg = f"{where}: {msg}"
     return msg
 

@@ -53,7 +53,14 @@ _ALIASES = {
     "times": "t",
     "temp": "temp",
     "temperature": "temp",
+    "millis": "t",
+    "micros": "t",
 }
+# a time column named with its unit (time_ms, t_us, TimeStamp_ns): the unit itself is read from
+# the median step (_time_in_seconds), the name only says which column is time
+for _base in ("t", "time", "timestamp", "ts"):
+    for _unit in ("", "s", "sec", "ms", "msec", "us", "usec", "ns", "nsec"):
+        _ALIASES[_base + _unit] = "t"
 _SENSOR_NAMES = {
     "a": ("a", "acc", "accel", "accelerometer", "acceleration"),
     "g": ("g", "gyr", "gyro", "gyroscope", "w"),
@@ -102,6 +109,9 @@ class SensorLog:
     """Canonical name -> the file's column name (or index) it came from."""
     notes: list[str] = field(default_factory=list)
     """What the loader assumed or dropped, for the report."""
+    layout: dict | None = field(default=None, repr=False, compare=False)
+    """Where the rows of a plain text file sit (encoding, first data line, delimiter, column
+    indices, time unit), for :func:`iter_rows`; None for MAT and compressed files."""
 
     def __len__(self) -> int:
         for a in (self.acc, self.mag, self.gyro):
@@ -362,6 +372,8 @@ class _Table:
     bad: int = 0
     preamble: dict[str, float] = field(default_factory=dict)
     odd_header: list[str] | None = None
+    layout: dict | None = None
+    """How the rows sit in a plain text file on disk (see :func:`iter_rows`), else None."""
 
 
 def _parse_rows(
@@ -431,6 +443,23 @@ def _parse_rows(
     return out, bad
 
 
+def iter_rows(path: str | Path, layout: dict, rows: int = 262_144):
+    """The data rows of a plain text log, in order, ``rows`` lines at a time: yields
+    ``(block, n_skipped)``, a float matrix of the file's columns and the count of rows with
+    the wrong number of fields (skipped, as :func:`load_log` skips them). ``layout`` is a
+    loaded log's :attr:`SensorLog.layout` (``load_log(path, max_rows=...)`` finds it from the
+    head); memory stays bounded by ``rows`` whatever the file's length."""
+    import itertools
+
+    args = (layout["delim"], layout["width"], layout["dec"], layout["trailing"])
+    with open(path, encoding=layout["enc"], newline=None, errors="replace") as fh:
+        for _ in itertools.islice(fh, layout["start"]):
+            pass
+        while lines := list(itertools.islice(fh, rows)):
+            body = [ln for ln in lines if (s := ln.lstrip()) and not s.startswith(_COMMENTS)]
+            yield _parse_rows(body, *args, layout["text_cols"])
+
+
 def _tail_codec(enc: str, head: bytes) -> str:
     if enc == "utf-8-sig":
         return "utf-8"
@@ -441,7 +470,12 @@ def _tail_codec(enc: str, head: bytes) -> str:
 
 
 def _read_text(
-    path: Path, raw: bytes, on_disk: bool, notes: list[str], tail_raw: bytes | None = None
+    path: Path,
+    raw: bytes,
+    on_disk: bool,
+    notes: list[str],
+    tail_raw: bytes | None = None,
+    max_rows: int | None = None,
 ) -> _Table:
     """Header (or None), a float matrix and preamble key/values; bad rows skipped and counted.
 
@@ -451,6 +485,8 @@ def _read_text(
 
     With `tail_raw`, `raw` is only the start of a big file on disk and `tail_raw` its end: a
     clean file then goes from disk to numpy's parser without being decoded here.
+    With `max_rows`, only the first `max_rows` data rows are read (the rest can be streamed
+    with the returned layout, :func:`iter_rows`).
     """
     big = tail_raw is not None
     text, enc = _decode(raw, path, notes, partial=big)
@@ -596,19 +632,35 @@ def _read_text(
     if ignored:
         notes.append(f"{len(ignored)} line(s) before the data ignored (first: {ignored[0][:60]!r})")
 
+    # label columns: a word in every cell of the first and the last rows (an empty cell or one
+    # number and the column is parsed)
+    rows = [split(ln) for ln in lines[start : start + 50] + sample if not _skip(ln)]
+    rows = [r for r in rows if len(r) == width]
+    text_cols = frozenset(
+        j
+        for j in range(width)
+        if len(rows) >= 5 and all(_strip_cell(r[j]) and not num(r[j]) for r in rows)
+    )
+    plain = on_disk and path.suffix.lower() not in (".gz", ".bz2", ".xz", ".lzma", ".zip")
+    layout = None
+    if plain:
+        layout = dict(
+            enc=enc, start=start, delim=delim, dec=dec, width=width, trailing=trailing,
+            text_cols=text_cols,
+        )  # fmt: skip
     data = None
     if not dec:
         # the fast path: numpy's C parser on the rows (reading the file itself when nothing had
         # to be decompressed); it refuses ragged rows and non-numbers, which go line by line
         try:
-            if on_disk and path.suffix.lower() not in (".gz", ".bz2", ".xz", ".lzma", ".zip"):
+            if plain:
                 # numpy opening the file itself is ~10 % faster than reading our handle
-                block = _loadtxt(str(path), delim, start, enc)
+                block = _loadtxt(str(path), delim, start, enc, max_rows=max_rows)
             elif on_disk:  # our own handle: numpy would decompress by the name
                 with open(path, encoding=enc, newline=None) as fh:
-                    block = _loadtxt(fh, delim, start)
+                    block = _loadtxt(fh, delim, start, max_rows=max_rows)
             else:
-                block = _loadtxt(_split_lines(text)[start:], delim, 0)
+                block = _loadtxt(_split_lines(text)[start:], delim, 0, max_rows=max_rows)
             if block.shape[1] == width:
                 data = block
         except (ValueError, OSError):  # UnicodeError is a ValueError
@@ -619,22 +671,18 @@ def _read_text(
             for ln in _split_lines(whole_text())[start:]
             if (s := ln.lstrip()) and not s.startswith(_COMMENTS)
         ]
-        # label columns: a word in every cell of the first and the last rows (an empty cell or
-        # one number and the column is parsed)
-        rows = [split(ln) for ln in lines[start : start + 50] + sample if not _skip(ln)]
-        rows = [r for r in rows if len(r) == width]
-        text_cols = frozenset(
-            j
-            for j in range(width)
-            if len(rows) >= 5 and all(_strip_cell(r[j]) and not num(r[j]) for r in rows)
-        )
-        data, more = _parse_rows(body, delim, width, dec, trailing, text_cols)
+        data, more = _parse_rows(body[:max_rows], delim, width, dec, trailing, text_cols)
         bad += more
-    return _Table(header, data, bad, preamble, odd_header)
+    return _Table(header, data, bad, preamble, odd_header, layout)
 
 
 def _loadtxt(
-    src, delim: str | None, skip: int, enc: str | None = None, usecols: list[int] | None = None
+    src,
+    delim: str | None,
+    skip: int,
+    enc: str | None = None,
+    usecols: list[int] | None = None,
+    max_rows: int | None = None,
 ) -> np.ndarray:
     return np.loadtxt(
         src,
@@ -646,6 +694,7 @@ def _loadtxt(
         comments="#",
         encoding=enc,
         usecols=usecols,
+        max_rows=max_rows,
     )
 
 
@@ -757,6 +806,7 @@ def load_log(
     columns: str | dict[str, str] | None = None,
     sample_rate: float | None = None,
     sensor: str | None = None,
+    max_rows: int | None = None,
 ) -> SensorLog:
     """Load a sensor log (see the module docstring for the formats).
 
@@ -771,6 +821,9 @@ def load_log(
     sensor : {"accel", "mag", "gyro"}, optional
         Which sensor the caller wants: decides how a headerless 3- or 4-column file (and a
         6- or 7-column one for "mag") is read. A note names every guess.
+    max_rows : int, optional
+        Read only the first ``max_rows`` data rows of a text file (MAT files are read whole);
+        :func:`iter_rows` streams the rest of a plain text file in bounded memory.
 
     Raises
     ------
@@ -801,7 +854,7 @@ def load_log(
     if lazy:
         # a big file that is not compressed and not a MAT file: read its ends only, numpy's
         # parser reads the rest from disk
-        tab = _read_text(path, raw[0], True, notes, tail_raw=raw[1])
+        tab = _read_text(path, raw[0], True, notes, tail_raw=raw[1], max_rows=max_rows)
         return _assemble(path, tab, mapping, sensor, sample_rate, notes)
     raw = raw[0] if not big else _read_bytes(path)
     if not raw:
@@ -813,7 +866,7 @@ def load_log(
         # a binary .mat without the version-5 text header: MATLAB v4
         tab = _read_mat(raw, path, notes)
     else:
-        tab = _read_text(path, raw, not compressed, notes)
+        tab = _read_text(path, raw, not compressed, notes, max_rows=max_rows)
     return _assemble(path, tab, mapping, sensor, sample_rate, notes)
 
 
@@ -966,8 +1019,9 @@ def _assemble(
         if rate is not None and not (np.isfinite(rate) and rate > 0):
             notes.append(f"preamble sample rate {rate:g} ignored (not a positive number)")
             rate = None
+    time_scale = 1.0
     if t is not None:
-        t, unit_note = _time_in_seconds(t)
+        t, unit_note, time_scale = _time_in_seconds(t)
         if unit_note:
             notes.append(unit_note)
     if rate is None and t is not None:
@@ -987,6 +1041,9 @@ def _assemble(
         path=str(path),
         columns={k: names[v] for k, v in source.items()},
         notes=notes,
+        layout=None
+        if tab.layout is None
+        else {**tab.layout, "source": source, "time_scale": time_scale},
     )
 
 
@@ -994,8 +1051,8 @@ _TIME_UNITS = ((1.0, "s"), (1e-3, "ms"), (1e-6, "us"), (1e-9, "ns"))
 _PLAUSIBLE_RATE = (2.0, 20_000.0)  # Hz: what an IMU log is recorded at
 
 
-def _time_in_seconds(t: np.ndarray) -> tuple[np.ndarray, str | None]:
-    """The time column in seconds, and a note when it was in ms, us or ns.
+def _time_in_seconds(t: np.ndarray) -> tuple[np.ndarray, str | None, float]:
+    """The time column in seconds, a note when it was in ms, us or ns, and the factor.
 
     Loggers write milliseconds (Arduino ``millis()``), microseconds or nanoseconds since boot
     or the epoch as often as seconds. Read as seconds, a 1 kHz log in nanoseconds has a rate of
@@ -1008,18 +1065,20 @@ def _time_in_seconds(t: np.ndarray) -> tuple[np.ndarray, str | None]:
         dt = np.diff(t[np.isfinite(t)])
         dt = dt[np.isfinite(dt) & (dt > 0)]
     if dt.size == 0:
-        return t, None
+        return t, None, 1.0
     step = float(np.median(dt))
     lo, hi = _PLAUSIBLE_RATE
     for scale, unit in _TIME_UNITS:
         if lo <= 1.0 / (step * scale) <= hi:
             if scale == 1.0:
-                return t, None
-            return t * scale, (
+                return t, None, 1.0
+            return (
+                t * scale,
                 f"time column read as {unit} (median step {step:g}: {1.0 / (step * scale):.4g} "
-                f"Hz); converted to seconds"
+                f"Hz); converted to seconds",
+                scale,
             )
-    return t, None
+    return t, None, 1.0
 
 
 def _example(width: int) -> str:

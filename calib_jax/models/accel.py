@@ -19,22 +19,10 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from ..linalg import inv3
-
-PARAM_NAMES = (
-    "alpha_x",
-    "alpha_y",
-    "alpha_z",
-    "S_xy",
-    "S_xz",
-    "S_yz",
-    "beta_x",
-    "beta_y",
-    "beta_z",
-)
+from .layout import ALPHA_INDEX, PARAM_NAMES  # noqa: F401  (re-exported)
 
 
 class AccelParams(eqx.Module):
@@ -70,11 +58,6 @@ class AccelParams(eqx.Module):
     def identity(cls, dtype=jnp.float64) -> AccelParams:
         """Unit gains, no cross terms, no bias (a reference point, never a fit result)."""
         return cls(gains=jnp.ones(3, dtype), nonorth=jnp.zeros(3, dtype), bias=jnp.zeros(3, dtype))
-
-
-ALPHA_INDEX = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
-"""Where alpha's entries sit in paper 1's vector [ax, ay, az, Sxy, Sxz, Syz, bx, by, bz]
-(alpha is symmetric): ``p[ALPHA_INDEX]`` is alpha, in JAX or, on the host, in numpy."""
 
 
 def alpha_matrix(p: Float[Array, "9"]) -> Float[Array, "3 3"]:

@@ -1,0 +1,193 @@
+"""Apply a saved calibration to a log: ``calib-jax apply CAL LOG`` and :func:`apply_calibration`.
+
+The calibration is any file :func:`calib_jax.export.read` reads (calib_jax's accelerometer,
+ellipsoid and MARG JSON; imu_tk, imucal and imu_calib files) or a calibration object. The
+log is read by the same front door as every command (:func:`calib_jax.io.load_log`: header or
+guessed columns, units of time); a plain text log is streamed ``chunk_rows`` lines at a time,
+so memory does not grow with its length. Compressed and MAT files are read whole.
+
+The output CSV holds one row per data row of the log, in order: ``t`` (seconds, as the loader
+reads the time column), the corrected ``ax, ay, az`` and ``mx, my, mz``, and the gyroscope and
+temperature columns unchanged. Rows with a non-finite cell keep it (NaN in, NaN out); rows
+with the wrong number of fields are skipped, as every command skips them, and counted.
+Numbers are written with 12 significant digits (the time with 17), more than any sensor
+resolves. Nothing here imports JAX.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .export import Correction, corrections
+from .io.files import SensorLog, iter_rows, load_log
+
+_TRIADS = (("acc", "a", "accel"), ("gyro", "g", None), ("mag", "m", "mag"))
+
+
+@dataclass
+class ApplyReport:
+    """What :func:`apply_calibration` wrote."""
+
+    out: str
+    rows: int
+    columns: list[str]
+    corrected: list[str]
+    """One line per corrected sensor (:meth:`Correction.describe`)."""
+    streamed: bool
+    """True when the log was read in chunks (a plain text file), False when read whole."""
+    notes: list[str] = field(default_factory=list)
+
+    def report(self) -> str:
+        how = "streamed in chunks" if self.streamed else "read whole"
+        out = [f"wrote {self.rows} rows ({', '.join(self.columns)}) to {self.out} ({how})"]
+        out += [f"corrected {c}" for c in self.corrected]
+        out += [f"note: {n}" for n in self.notes]
+        return "\n".join(out)
+
+
+def _plan(corr: dict[str, Correction], log: SensorLog) -> tuple[dict[str, Correction], list]:
+    """Which of the log's triads each correction applies to; an error when none applies."""
+    use = {attr: corr[s] for attr, _, s in _TRIADS if s in corr and getattr(log, attr) is not None}
+    notes = [
+        f"the calibration corrects the {s}, but the log has no {p}x, {p}y, {p}z columns: "
+        "nothing to correct there"
+        for attr, p, s in _TRIADS
+        if s in corr and getattr(log, attr) is None
+    ]
+    if not use:
+        wanted = " and ".join(f"{p}x, {p}y, {p}z" for _, p, s in _TRIADS if s in corr)
+        raise ValueError(
+            f"{log.path}: the calibration corrects {' and '.join(corr)}, but the log has no "
+            f"{wanted} columns (found: {', '.join(log.columns) or 'none'}); map them with "
+            "--columns"
+        )
+    return use, notes
+
+
+def correct_log(cal, log: SensorLog) -> SensorLog:
+    """A copy of a loaded log with its accelerometer and magnetometer corrected (a MARG
+    magnetometer rotated into the accelerometer's frame); the other columns as they were."""
+    use, notes = _plan(corrections(cal), log)
+    new = {attr: c.apply(getattr(log, attr)) for attr, c in use.items()}
+    return replace(log, **new, notes=[*log.notes, *notes], layout=None)
+
+
+def apply_calibration(
+    cal,
+    log,
+    out: str | Path | None = None,
+    *,
+    columns=None,
+    sample_rate: float | None = None,
+    chunk_rows: int = 262_144,
+) -> SensorLog | ApplyReport:
+    """Apply ``cal`` to ``log``.
+
+    Parameters
+    ----------
+    cal : calibration object, dict or path
+        Anything :func:`calib_jax.export.corrections` takes.
+    log : path or SensorLog
+        The log to correct.
+    out : path, optional
+        Write the corrected log here as CSV (streamed, see the module docstring) and return an
+        :class:`ApplyReport`. Without it, return the corrected :class:`SensorLog` in memory.
+    columns, sample_rate
+        As :func:`calib_jax.load_log` (for headerless logs).
+    chunk_rows : int
+        Lines per chunk when streaming.
+    """
+    corr = corrections(cal)
+    if isinstance(log, SensorLog):
+        fixed = correct_log(corr, log)
+        return fixed if out is None else _write(out, [(_columns(fixed), 0)], fixed, corr, False)
+    if out is None:
+        return correct_log(corr, load_log(log, columns=columns, sample_rate=sample_rate))
+    if Path(out).resolve() == Path(log).resolve():
+        raise ValueError(f"--out {out} is the log itself: write the corrected log elsewhere")
+    head = load_log(log, columns=columns, sample_rate=sample_rate, max_rows=chunk_rows)
+    _plan(corr, head)  # refuse before writing anything
+    if head.layout is None and len(head) >= chunk_rows:
+        head = load_log(log, columns=columns, sample_rate=sample_rate)  # compressed: whole
+    if head.layout is None or len(head) < chunk_rows:
+        fixed = correct_log(corr, head)
+        return _write(out, [(_columns(fixed), 0)], head, corr, False)
+    return _write(out, _stream(log, head, corr, chunk_rows), head, corr, True)
+
+
+def _columns(log: SensorLog) -> dict[str, np.ndarray]:
+    """The output columns of a (corrected) log, in the output's order."""
+    cols: dict[str, np.ndarray] = {}
+    if log.t is not None:
+        cols["t"] = log.t
+    for attr, p, _ in _TRIADS:
+        x = getattr(log, attr)
+        if x is not None:
+            cols.update({p + a: x[:, i] for i, a in enumerate("xyz")})
+    if log.temp is not None:
+        cols["temp"] = log.temp
+    return cols
+
+
+def _stream(path, head: SensorLog, corr, chunk_rows: int):
+    """The whole file in blocks, as (output columns, rows skipped), corrected, in order."""
+    lay = head.layout
+    src = lay["source"]
+    use, _ = _plan(corr, head)
+    for block, bad in iter_rows(path, lay, chunk_rows):
+        part = SensorLog(acc=None)
+        if "t" in src:
+            part.t = block[:, src["t"]] * lay["time_scale"]
+        if "temp" in src:
+            part.temp = block[:, src["temp"]]
+        for attr, p, _ in _TRIADS:
+            if getattr(head, attr) is not None:
+                x = block[:, [src[p + a] for a in "xyz"]]
+                setattr(part, attr, use[attr].apply(x) if attr in use else x)
+        yield _columns(part), bad
+
+
+def _write(out, blocks, head: SensorLog, corr, streamed: bool) -> ApplyReport:
+    """Write the blocks to a temporary file beside ``out``, then rename it: an error midway
+    leaves no half-written log under ``out``."""
+    out = Path(out)
+    use, plan_notes = _plan(corr, head)
+    names: list[str] | None = None
+    rows = skipped = 0
+    fd, tmp = tempfile.mkstemp(prefix=out.name + ".", suffix=".part", dir=out.parent)
+    try:
+        with os.fdopen(fd, "w", newline="\n") as fh:
+            for cols, bad in blocks:
+                skipped += bad
+                if names is None:
+                    names = list(cols)
+                    fh.write(",".join(names) + "\n")
+                n = len(cols[names[0]])
+                if n:
+                    fmt = ["%.17g" if c == "t" else "%.12g" for c in names]
+                    table = np.column_stack([cols[c] for c in names])
+                    np.savetxt(fh, table, fmt=fmt, delimiter=",")
+                    rows += n
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    notes = list(head.notes) + plan_notes + [n for c in use.values() for n in c.notes]
+    if skipped:
+        notes.append(
+            f"{skipped} row{'s' if skipped > 1 else ''} had the wrong number of fields and "
+            f"{'were' if skipped > 1 else 'was'} skipped"
+        )
+    return ApplyReport(
+        out=str(out),
+        rows=rows,
+        columns=names or [],
+        corrected=[c.describe() for c in use.values()],
+        streamed=streamed,
+        notes=notes,
+    )

@@ -1,0 +1,496 @@
+"""A saved calibration as the correction other tools apply, written and read in their formats.
+
+Every calibration calib_jax saves is, per sensor, one affine correction
+
+    x = C (raw - b)
+
+- accelerometer (paper 1): C = alpha^-1, b = beta;
+- ellipsoid (paper 2, ``calib-jax mag``): C = W (the soft-iron matrix), b = the centre;
+- MARG (``calib-jax marg``): the accelerometer's, and the magnetometer's with the rotation
+  folded in, C = R_mag_to_acc W, so its output is in the accelerometer's frame.
+
+:class:`Correction` holds that form; :func:`corrections` takes it from any saved calibration
+(object, dict or JSON path). The writers and readers below hold each tool's convention:
+
+========  =============================================  ======================================
+format    file                                           the tool's equation
+========  =============================================  ======================================
+c         a C header for firmware (float constants and   x = C (raw - b)
+          an inline function)
+imu_tk    ``CalibratedTriad_::save``'s text: T, K        X' = T K (X - B)
+          (3 x 3 each, row-major) and B
+imucal    ``FerrarisCalibrationInfo`` JSON               a = R_a^-1 K_a^-1 (raw - b_a)
+ros       ``imu_calib``'s YAML (``SM``, ``bias``)        corrected = SM raw - bias
+========  =============================================  ======================================
+
+Numbers are written with 17 significant digits (float64 round trip) except in the C header,
+whose float constants carry 9 (float32 round trip). Nothing here imports JAX.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .calibration import AccelCalibration, MagCalibration, _read_json
+from .models.layout import ALPHA_INDEX
+
+FORMATS = ("c", "imu_tk", "imucal", "ros")
+G_STANDARD = 9.80665
+"""m/s^2 per g: ROS messages carry accelerations in m/s^2 (REP 103)."""
+
+
+@dataclass(frozen=True)
+class Correction:
+    """x = matrix @ (raw - bias) for one sensor triad."""
+
+    sensor: str
+    """'accel' or 'mag'."""
+    matrix: np.ndarray
+    """C (3 x 3)."""
+    bias: np.ndarray
+    """b (3,), in input units."""
+    input_units: str | None = None
+    output_units: str | None = None
+    frame: str = "sensor"
+    """'sensor', or 'accel' for a MARG magnetometer rotated into the accelerometer's frame."""
+    status: str | None = None
+    source: str | None = None
+    notes: tuple[str, ...] = ()
+    """What the file held that this correction does not apply."""
+
+    def apply(self, raw) -> np.ndarray:
+        """Corrected vectors for one reading (3,) or many (N, 3)."""
+        return (np.asarray(raw, float) - self.bias) @ self.matrix.T
+
+    def describe(self) -> str:
+        """One line: the sensor, the equation, the units and the frame."""
+        units = f"{self.input_units or 'raw units'} -> {self.output_units or 'calibrated units'}"
+        frame = ", in the accelerometer's frame" if self.frame == "accel" else ""
+        return f"{self.sensor}: x = C (raw - b), {units}{frame}"
+
+
+# ---------------------------------------------------------------------------------------------
+# from calib_jax's own records
+
+
+def corrections(cal) -> dict[str, Correction]:
+    """The corrections a saved calibration applies, by sensor ('accel', 'mag').
+
+    ``cal``: an :class:`~calib_jax.AccelCalibration`, :class:`~calib_jax.MagCalibration`,
+    :class:`~calib_jax.marg.MARGRecord`, their ``to_dict()``, or the path of their JSON (or of
+    a file in one of :data:`FORMATS`, read by :func:`read`). Raises ValueError naming the file
+    and the fault for anything else. A MARG record whose accelerometer was used as given
+    (``--accel none``) has no accelerometer correction.
+    """
+    if isinstance(cal, str | Path):
+        return read(cal)
+    if isinstance(cal, Correction):
+        return {cal.sensor: cal}
+    if isinstance(cal, dict) and cal and all(isinstance(v, Correction) for v in cal.values()):
+        return dict(cal)
+    if isinstance(cal, AccelCalibration):
+        return {"accel": _accel(cal)}
+    if isinstance(cal, MagCalibration):
+        return {cal.sensor: _ellipsoid(cal)}
+    d = cal.to_dict() if hasattr(cal, "to_dict") else cal
+    if not isinstance(d, dict):
+        raise ValueError(
+            f"expected a calibration (AccelCalibration, MagCalibration, MARGRecord, a dict or "
+            f"a JSON path), got {type(cal).__name__}"
+        )
+    return _from_dict(d, d.get("source"))
+
+
+def _accel(cal: AccelCalibration) -> Correction:
+    return Correction(
+        sensor="accel",
+        matrix=np.linalg.inv(cal.params[ALPHA_INDEX]),
+        bias=np.array(cal.bias, float),
+        input_units=cal.input_units,
+        output_units=cal.output_units,
+        status=cal.status,
+        source=cal.source,
+    )
+
+
+def _ellipsoid(cal: MagCalibration) -> Correction:
+    if cal.field is not None:
+        out = f"the field's units (|x| = {cal.field:g})"
+    else:
+        out = cal.units  # det W = 1: the raw units' scale
+    return Correction(
+        sensor=cal.sensor,
+        matrix=np.array(cal.soft_iron, float),
+        bias=np.array(cal.center, float),
+        input_units=cal.units,
+        output_units=out,
+        status=cal.status,
+        source=cal.source,
+    )
+
+
+def _from_dict(d: dict, where) -> dict[str, Correction]:
+    kind = d.get("kind")
+    if kind == "marg":
+        out = {}
+        a = d.get("accel")
+        if a is not None:
+            out.update(_from_dict(a, where))
+        mag = _ellipsoid(MagCalibration.from_dict(d["mag"], source=where))
+        R = np.asarray(d["R_mag_to_acc"], float)
+        if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+            raise ValueError(f"{where}: key 'R_mag_to_acc' is not a finite 3 x 3 matrix")
+        out["mag"] = Correction(
+            sensor="mag",
+            matrix=R @ mag.matrix,
+            bias=mag.bias,
+            input_units=mag.input_units,
+            output_units=mag.output_units,
+            frame="accel",
+            status=d.get("status"),
+            source=d.get("source"),
+        )
+        return out
+    if kind == "ellipsoid":
+        cal = MagCalibration.from_dict(d, source=where)
+        return {cal.sensor: _ellipsoid(cal)}
+    return {"accel": _accel(AccelCalibration.from_dict(d, source=where))}
+
+
+# ---------------------------------------------------------------------------------------------
+# writers
+
+
+def write(cal, fmt: str, *, sensor: str | None = None, name: str = "calib") -> str:
+    """The text of ``cal`` in format ``fmt`` (one of :data:`FORMATS`).
+
+    ``sensor`` picks one triad for the single-triad formats (imu_tk, ros) when the calibration
+    holds two (MARG); ``name`` prefixes the C header's identifiers.
+    """
+    corr = corrections(cal)
+    if fmt == "c":
+        return to_c_header(corr, name=name)
+    if fmt == "imucal":
+        return to_imucal_json(_one(corr, sensor or "accel", fmt))
+    if fmt == "imu_tk":
+        return to_imu_tk(_one(corr, sensor, fmt))
+    if fmt == "ros":
+        return to_ros_yaml(_one(corr, sensor, fmt))
+    raise ValueError(f"unknown export format {fmt!r}; use one of {', '.join(FORMATS)}")
+
+
+def _one(corr: dict[str, Correction], sensor: str | None, fmt: str) -> Correction:
+    if sensor is None:
+        if len(corr) > 1:
+            raise ValueError(
+                f"the calibration holds {' and '.join(corr)}; a {fmt} file holds one triad: "
+                f"choose with --sensor ({' or '.join(corr)})"
+            )
+        return next(iter(corr.values()))
+    if sensor not in corr:
+        why = (
+            "imucal's FerrarisCalibrationInfo holds an accelerometer (and a gyroscope), no "
+            "magnetometer; export it as c, imu_tk or ros"
+            if fmt == "imucal"
+            else f"choose one of {', '.join(corr)}"
+        )
+        raise ValueError(f"the calibration has no {sensor} correction to write as {fmt}: {why}")
+    return corr[sensor]
+
+
+def _header_lines(corr: dict[str, Correction]) -> list[str]:
+    c0 = next(iter(corr.values()))
+    lines = [f"calib_jax calibration from {c0.source or 'an unnamed log'}"]
+    lines.append(
+        "written "
+        + _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+        + "; status "
+        + ", ".join(f"{k} {c.status}" for k, c in corr.items())
+    )
+    lines += [c.describe() for c in corr.values()]
+    return lines
+
+
+def to_c_header(corr: dict[str, Correction] | Correction, name: str = "calib") -> str:
+    """A C99 header: ``<NAME>_<SENSOR>_C[3][3]`` and ``_B[3]`` float constants and an inline
+    ``<name>_<sensor>_correct(const float raw[3], float out[3])`` per sensor."""
+    if isinstance(corr, Correction):
+        corr = {corr.sensor: corr}
+    ident = re.sub(r"\W", "_", name).strip("_") or "calib"
+    if ident[0].isdigit():
+        ident = "c_" + ident
+    up = ident.upper()
+    guard = f"{up}_CALIBRATION_H"
+    out = ["/*"]
+    out += [f" * {ln}" for ln in _header_lines(corr)]
+    out += [
+        " *",
+        " * out = C (raw - b): raw in the input units above, out in the output units.",
+        " */",
+        f"#ifndef {guard}",
+        f"#define {guard}",
+        "",
+    ]
+    for s, c in corr.items():
+        S = s.upper()
+        rows = ",\n".join("    {" + ", ".join(_cfloat(v) for v in row) + "}" for row in c.matrix)
+        out += [
+            f"/* {c.describe()} */",
+            f"static const float {up}_{S}_C[3][3] = {{\n{rows}\n}};",
+            f"static const float {up}_{S}_B[3] = {{" + ", ".join(_cfloat(v) for v in c.bias) + "};",
+            "",
+            f"static inline void {ident}_{s}_correct(const float raw[3], float out[3])",
+            "{",
+            f"    const float d[3] = {{raw[0] - {up}_{S}_B[0], raw[1] - {up}_{S}_B[1], "
+            f"raw[2] - {up}_{S}_B[2]}};",
+            "    for (int i = 0; i < 3; ++i)",
+            f"        out[i] = {up}_{S}_C[i][0] * d[0] + {up}_{S}_C[i][1] * d[1] + "
+            f"{up}_{S}_C[i][2] * d[2];",
+            "}",
+            "",
+        ]
+    out += [f"#endif /* {guard} */", ""]
+    return "\n".join(out)
+
+
+def _cfloat(v: float) -> str:
+    """A C float literal that round-trips float32 (``1.0f``, not the invalid ``1f``)."""
+    s = f"{v:.9g}"
+    return (s if any(c in s for c in ".e") else s + ".0") + "f"
+
+
+def _num(v: float) -> str:
+    return f"{v:.17g}"
+
+
+def imu_tk_factors(c: Correction) -> tuple[np.ndarray, np.ndarray]:
+    """imu_tk's misalignment T and scale K with T K = C.
+
+    K is C's diagonal, so T has imu_tk's unit diagonal; when some diagonal entry is small next
+    to its column (a MARG magnetometer whose axes are permuted into the accelerometer's), K is
+    the column norms instead and T's columns are unit vectors."""
+    C = np.asarray(c.matrix, float)
+    d = np.diag(C).copy()
+    norms = np.linalg.norm(C, axis=0)
+    k = d if np.all(np.abs(d) >= 0.5 * norms) else norms
+    return C / k, np.diag(k)
+
+
+def to_imu_tk(c: Correction) -> str:
+    """imu_tk's calibration text (``CalibratedTriad_::load`` reads it): T, K and B, numbers
+    only, as imu_tk writes them (a comment would break its reader)."""
+    T, K = imu_tk_factors(c)
+
+    def block(m):
+        return "\n".join(" ".join(_num(v) for v in row) for row in np.atleast_2d(m))
+
+    return f"{block(T)}\n\n{block(K)}\n\n{block(c.bias.reshape(3, 1))}\n\n"
+
+
+def to_imucal_json(c: Correction, gyro: Correction | None = None) -> str:
+    """imucal's ``FerrarisCalibrationInfo`` JSON (``CalibrationInfo.from_json_file`` reads it).
+
+    imucal applies a = R_a^-1 K_a^-1 (raw - b_a): K_a R_a = C^-1, K_a the row norms of C^-1
+    (the sensitivities) and R_a its rows made unit (the axes' directions, Ferraris' form).
+    calib_jax has no gyroscope calibration yet: unless ``gyro`` is given, K_g and R_g are the
+    identity and b_g, K_ga zero, so imucal passes the gyroscope through unchanged, and the
+    ``comment`` field says so.
+    """
+    if c.sensor != "accel":
+        raise ValueError(
+            "imucal's FerrarisCalibrationInfo holds an accelerometer (and a gyroscope), no "
+            "magnetometer; export the magnetometer as c, imu_tk or ros"
+        )
+    M = np.linalg.inv(c.matrix)
+    k = np.linalg.norm(M, axis=1)
+    comment = f"calib_jax: {c.describe()}; from {c.source or 'an unnamed log'}, status {c.status}"
+    if gyro is None:
+        Kg, Rg, bg = np.eye(3), np.eye(3), np.zeros(3)
+        comment += (
+            "; gyroscope NOT calibrated by calib_jax: K_g, R_g identity and b_g, K_ga zero "
+            "pass it through unchanged"
+        )
+    else:
+        Mg = np.linalg.inv(gyro.matrix)
+        kg = np.linalg.norm(Mg, axis=1)
+        Kg, Rg, bg = np.diag(kg), Mg / kg[:, None], gyro.bias
+    d = {
+        "acc_unit": c.output_units,
+        "gyr_unit": None if gyro is None else gyro.output_units,
+        "from_acc_unit": c.input_units,
+        "from_gyr_unit": None if gyro is None else gyro.input_units,
+        "comment": comment,
+        "K_a": np.diag(k).tolist(),
+        "R_a": (M / k[:, None]).tolist(),
+        "b_a": np.asarray(c.bias).tolist(),
+        "K_g": Kg.tolist(),
+        "R_g": Rg.tolist(),
+        "K_ga": np.zeros((3, 3)).tolist(),
+        "b_g": np.asarray(bg).tolist(),
+        "cal_type": "Ferraris",
+        "_format_version": "2.0.0",
+    }
+    return json.dumps(d, indent=4) + "\n"
+
+
+def to_ros_yaml(c: Correction) -> str:
+    """``imu_calib``'s YAML (``SM`` row-major, ``bias``): corrected = SM raw - bias, so
+    SM = C and bias = C b. An accelerometer calibrated to g is scaled to m/s^2, the unit of
+    ``sensor_msgs/Imu`` (REP 103); the comment says what was done."""
+    C, bias = np.asarray(c.matrix, float), c.matrix @ c.bias
+    out_units = c.output_units
+    lines = ["# " + ln for ln in _header_lines({c.sensor: c})]
+    if c.sensor == "accel" and out_units == "g":
+        C, bias, out_units = C * G_STANDARD, bias * G_STANDARD, "m/s^2"
+        lines.append(f"# scaled from g to m/s^2 (x {G_STANDARD}) for sensor_msgs/Imu")
+    lines.append(
+        f"# corrected = SM raw - bias; raw in {c.input_units or 'raw units'}, "
+        f"corrected in {out_units or 'calibrated units'}"
+    )
+    if c.sensor != "accel":
+        lines.append(
+            "# imu_calib's apply_calib node applies this form to sensor_msgs/Imu; apply it to "
+            "the magnetometer in your own node"
+        )
+    lines.append(f"sensor: {c.sensor}")
+    lines.append("SM: [" + ", ".join(_num(v) for v in C.ravel()) + "]")
+    lines.append("bias: [" + ", ".join(_num(v) for v in bias) + "]")
+    return "\n".join(lines) + "\n"
+
+
+def save(cal, fmt: str, path: str | Path, **kw) -> Path:
+    """Write :func:`write`'s text to ``path``; returns the path."""
+    path = Path(path)
+    path.write_text(write(cal, fmt, **kw))
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# readers
+
+
+def read(path: str | Path, sensor: str | None = None) -> dict[str, Correction]:
+    """The corrections in a file: calib_jax's JSON (accel, ellipsoid, MARG), imucal's JSON,
+    imu_calib's YAML or imu_tk's text, told apart by their content. ``sensor`` names the
+    triad of an imu_tk file (its text does not say; default 'accel')."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(
+            f"calibration {path} {'is a directory' if path.is_dir() else 'does not exist'}"
+        )
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is not a calibration file (not text)") from None
+    head = text.lstrip()
+    if head.startswith("{"):
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path} is not a calibration JSON file: {exc}") from None
+        if isinstance(d, dict) and "cal_type" in d:
+            return {"accel": from_imucal_json(text, source=str(path))}
+        d = _read_json(path)  # calib_jax's own: NaN tokens and versions checked
+        return _from_dict(d, str(path))
+    if re.search(r"^\s*SM\s*:", text, re.M):
+        c = from_ros_yaml(text, source=str(path))
+        return {c.sensor: c}
+    try:
+        c = from_imu_tk(text, sensor=sensor or "accel", source=str(path))
+    except ValueError as exc:
+        raise ValueError(
+            f"{path} is not a calibration file ({exc}); calib_jax reads its own JSON (calib-jax "
+            "accel, mag, marg --json), imucal's JSON, imu_calib's YAML (SM, bias) and imu_tk's "
+            "text (21 numbers). Is it a log? calib-jax apply takes the calibration first, then "
+            "the log"
+        ) from None
+    return {c.sensor: c}
+
+
+def from_imu_tk(text: str, sensor: str = "accel", source: str | None = None) -> Correction:
+    """Read imu_tk's text (T, K, B): 21 numbers, as its ``load`` reads them."""
+    try:
+        v = np.array([float(t) for t in text.split()])
+    except ValueError:
+        raise ValueError(
+            "not an imu_tk calibration either (it holds only numbers: the misalignment and "
+            "scale matrices, row-major, then the bias)"
+        ) from None
+    if v.size != 21:
+        raise ValueError(
+            f"{source or 'text'}: an imu_tk calibration holds 21 numbers (T, K, B); found {v.size}"
+        )
+    T, K, B = v[:9].reshape(3, 3), v[9:18].reshape(3, 3), v[18:]
+    return _checked(Correction(sensor, T @ K, B, source=source), source)
+
+
+def from_imucal_json(text: str, source: str | None = None) -> Correction:
+    """The accelerometer correction of imucal's Ferraris (or Turntable) JSON."""
+    d = json.loads(text)
+    if d.get("cal_type") not in ("Ferraris", "Turntable"):
+        raise ValueError(
+            f"{source or 'text'}: imucal calibration type {d.get('cal_type')!r} is not read "
+            "here (Ferraris and Turntable are)"
+        )
+    try:
+        K, R = np.asarray(d["K_a"], float), np.asarray(d["R_a"], float)
+        b = np.asarray(d["b_a"], float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{source or 'text'}: imucal JSON without a usable {exc}") from None
+    C = np.linalg.inv(R) @ np.linalg.inv(K)
+    notes = ()
+    if d.get("K_g") is not None and not np.allclose(np.asarray(d["K_g"], float), np.eye(3)):
+        notes = (
+            "the imucal file's gyroscope calibration (K_g, R_g, b_g, K_ga) is not applied: "
+            "calib_jax has no gyroscope model yet, so gx, gy, gz are written as read",
+        )
+    c = Correction(
+        "accel", C, b, input_units=d.get("from_acc_unit"), output_units=d.get("acc_unit"),
+        source=source, notes=notes,
+    )  # fmt: skip
+    return _checked(c, source)
+
+
+def _yaml_list(text: str, key: str) -> np.ndarray | None:
+    """A list of numbers under ``key``: flow (``key: [1, 2]``) or block (``- 1`` lines), the
+    two styles yaml-cpp and PyYAML write."""
+    m = re.search(rf"^{key}\s*:\s*\[([^\]]*)\]", text, re.M)
+    if m:
+        items = m.group(1).split(",")
+    else:
+        m = re.search(rf"^{key}\s*:\s*\n((?:[ \t]*-[^\n]*\n?)+)", text, re.M)
+        if not m:
+            return None
+        items = [ln.strip()[1:] for ln in m.group(1).splitlines() if ln.strip()]
+    return np.array([float(s) for s in items if s.strip()])
+
+
+def from_ros_yaml(text: str, source: str | None = None) -> Correction:
+    """``imu_calib``'s YAML: SM (9, row-major) and bias (3); corrected = SM raw - bias."""
+    try:
+        SM, bias = _yaml_list(text, "SM"), _yaml_list(text, "bias")
+    except ValueError:
+        SM = bias = None
+    if SM is None or bias is None or SM.size != 9 or bias.size != 3:
+        raise ValueError(
+            f"{source or 'text'}: not an imu_calib YAML (it needs 'SM' with 9 numbers and "
+            "'bias' with 3)"
+        )
+    m = re.search(r"^sensor\s*:\s*(\w+)", text, re.M)
+    C = SM.reshape(3, 3)
+    c = Correction(m.group(1) if m else "accel", C, np.linalg.solve(C, bias), source=source)
+    return _checked(c, source)
+
+
+def _checked(c: Correction, source) -> Correction:
+    if not (np.all(np.isfinite(c.matrix)) and np.all(np.isfinite(c.bias))):
+        raise ValueError(f"{source or 'text'}: the calibration holds non-finite numbers")
+    if not np.linalg.cond(c.matrix) < 1e12:
+        raise ValueError(f"{source or 'text'}: the correction matrix is singular")
+    return c
