@@ -154,6 +154,26 @@ class BatchResult(eqx.Module):
 
         return np.array([is_converged(int(s)) for s in np.asarray(self.status)])
 
+    def rows(self, names=None) -> list[dict]:
+        """One dict per sensor: status, message, each parameter and its standard error, rms,
+        iterations, samples (``names`` labels the sensors, e.g. their files)."""
+        from .display import batch_rows
+
+        return batch_rows(self, names)
+
+    def to_dataframe(self, names=None):
+        """:meth:`rows` as a pandas DataFrame."""
+        from .display import to_dataframe
+
+        return to_dataframe(self.rows(names))
+
+    def _repr_html_(self) -> str:
+        from .display import rows_html
+
+        ok = int(self.success.sum())
+        n = len(self.success)
+        return f"<b>BatchResult</b>: {ok} of {n} sensors converged" + rows_html(self.rows())
+
 
 def _normalise(raw, valid):
     """One sensor: mean and RMS radius of the valid samples."""

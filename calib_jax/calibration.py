@@ -115,6 +115,16 @@ class AccelCalibration:
     __hash__ = None  # type: ignore[assignment]  # holds arrays
 
     # ---- report ----------------------------------------------------------------------------
+    def __repr__(self) -> str:
+        from .display import accel_repr
+
+        return accel_repr(self)
+
+    def _repr_html_(self) -> str:
+        from .display import accel_html
+
+        return accel_html(self)
+
     def table(self) -> str:
         """Paper 1 Table 1 layout: each parameter with its standard error."""
         same = self.input_units == self.output_units
@@ -559,6 +569,16 @@ class MagCalibration:
         return _fields_equal(self, other)
 
     __hash__ = None  # type: ignore[assignment]  # holds arrays
+
+    def __repr__(self) -> str:
+        from .display import mag_repr
+
+        return mag_repr(self)
+
+    def _repr_html_(self) -> str:
+        from .display import mag_html
+
+        return mag_html(self)
 
     def report(self) -> str:
         unit = self.units or "raw units"

@@ -321,16 +321,19 @@ def run_batch(args: argparse.Namespace) -> int:
             chunk=args.chunk,
             columns=args.columns,
             use=args.use,
+            progress=False if args.no_progress else None,
             **options,
         )
     out = open(args.json, "w") if args.json else None  # noqa: SIM115
     n_ok = n_all = 0
-    not_ok = []
+    not_ok: list[str] = []
+    table_rows: list[dict] = []
     try:
         if out:
             head = json.dumps({"format_version": 1, "sensor": args.sensor})[:-1]
             out.write(head + ', "results": [\n')
         for r in results:
+            table_rows.append(r)
             # written as they arrive: a crash keeps what was calibrated so far
             if out:
                 out.write(("" if n_all == 0 else ",\n") + json.dumps(r))
@@ -348,6 +351,11 @@ def run_batch(args: argparse.Namespace) -> int:
     for line in not_ok:
         print(line)
     print(f"{n_ok} of {n_all} calibrated" + (f"; wrote {args.json}" if args.json else ""))
+    if args.table:
+        from .display import fleet_rows, write_table
+
+        write_table(fleet_rows(table_rows, args.sensor), args.table)
+        print(f"wrote {args.table} ({n_all} rows)")
     return 0 if n_ok == n_all else 1
 
 
@@ -602,7 +610,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--workers", type=_pos_int, default=2, help="local Dask workers")
     b.add_argument("--json", default=None, help="write all results here (streamed)")
-    b.set_defaults(func=run_batch, output_files=(("json", "--json"),))
+    b.add_argument(
+        "--table",
+        default=None,
+        help="write one row per file (parameters, standard errors, status, rms, notes) as CSV, "
+        "or Parquet for a .parquet name (needs pandas and pyarrow)",
+    )
+    b.add_argument("--no-progress", action="store_true", help="no progress bar")
+    b.set_defaults(func=run_batch, output_files=(("json", "--json"), ("table", "--table")))
 
     d = sub.add_parser(
         "demo", help="calibrate the accelerometer and magnetometer logs shipped with the package"

@@ -13,7 +13,6 @@ local one by default, or a scheduler address), each worker running the same chun
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -162,6 +161,16 @@ def _chunks(items: list, size: int) -> Iterator[list]:
         yield items[i : i + size]
 
 
+def progress_bar(total: int, enabled: bool | None, desc: str):
+    """A ``tqdm.auto`` bar (a widget in Jupyter, a line on a terminal). ``enabled=None``:
+    shown on a terminal or in a notebook kernel, hidden when output goes to a file or pipe."""
+    from tqdm.auto import tqdm
+
+    if enabled is None:
+        enabled = sys.stderr.isatty() or "ipykernel" in sys.modules
+    return tqdm(total=total, desc=desc, unit="file", disable=not enabled, leave=True)
+
+
 def calibrate_files(
     paths: Iterable[str | Path],
     *,
@@ -169,7 +178,7 @@ def calibrate_files(
     chunk: int = 256,
     columns: str | None = None,
     use: str = "means",
-    progress: bool = True,
+    progress: bool | None = None,
     **options,
 ) -> Iterator[dict]:
     """Calibrate many logs chunk by chunk, yielding one result dict per file, in order.
@@ -177,27 +186,27 @@ def calibrate_files(
     Each log is prepared as :func:`calib_jax.calibrate_accel` / :func:`calib_jax.calibrate_mag`
     would prepare it (:func:`prepare_log`; ``use`` as in ``calibrate_accel``), so a file gets
     the parameters its single fit gives. ``options`` go to the batch fit (``g``, ``model``,
-    ``solver``, ``field`` ...). Memory holds one chunk; with ``progress`` a line on stderr
-    counts files, failures and rate.
+    ``solver``, ``field`` ...). Memory holds one chunk. ``progress``: a progress bar counting
+    files and failures (:func:`progress_bar`; None: on a terminal or in a notebook only).
     """
     paths = [str(p) for p in paths]
-    t0, done, failed = time.perf_counter(), 0, 0
-    for part in _chunks(paths, chunk):
-        for res in _fit_chunk(part, sensor, columns, options, use):
-            done += 1
-            failed += res["status"] != "ok"
-            yield res
-        if progress:
-            rate = done / max(time.perf_counter() - t0, 1e-9)
-            print(
-                f"\r[{done}/{len(paths)}] {100 * done / len(paths):5.1f} %  "
-                f"{failed} not calibrated  {rate:.0f} files/s",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
-    if progress and paths:
-        print(file=sys.stderr)
+    failed = 0
+    with progress_bar(len(paths), progress, f"calibrating {sensor}") as bar:
+        for part in _chunks(paths, chunk):
+            for res in _fit_chunk(part, sensor, columns, options, use):
+                failed += res["status"] != "ok"
+                bar.update(1)
+                bar.set_postfix(not_calibrated=failed, refresh=False)
+                yield res
+
+
+def to_dataframe(results, sensor: str | None = None):
+    """The result dicts of :func:`calibrate_files` (or ``calib-jax batch --json``'s
+    ``results``) as a pandas DataFrame, one row per file (:func:`calib_jax.display.fleet_rows`)."""
+    from .display import fleet_rows
+    from .display import to_dataframe as frame
+
+    return frame(fleet_rows(results, sensor))
 
 
 def calibrate_files_dask(

@@ -230,6 +230,11 @@ class MARGRecord:
     def success(self) -> bool:
         return self.status in ("ok", "poorly_determined")
 
+    def _repr_html_(self) -> str:
+        from .display import marg_html
+
+        return marg_html(self)
+
     def alignment_text(self) -> str:
         """One line on the accel-mag rotation (the demo's wording)."""
         return (

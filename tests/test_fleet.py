@@ -123,9 +123,17 @@ def test_reference_magnitude_follows_each_logs_unit(fleet_dir, tmp_path):
 
 
 def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
+    """The JSON streams every file's result; ``--table`` writes the same results one row per
+    file (parameters by name, their standard errors, status and why), and
+    ``fleet.to_dataframe`` gives the same table as a DataFrame."""
+    import csv
+
+    from calib_jax.fleet import to_dataframe
+
     d, truth = fleet_dir
     out = tmp_path / "fleet.json"
-    rc = main(["batch", str(d), "--json", str(out), "--chunk", "4"])
+    table = tmp_path / "fleet.csv"
+    rc = main(["batch", str(d), "--json", str(out), "--chunk", "4", "--table", str(table)])
     assert rc == 1  # one file could not be calibrated
     doc = json.loads(out.read_text())
     assert doc["format_version"] == 1 and len(doc["results"]) == 6
@@ -134,6 +142,22 @@ def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
     assert "5 of 6 calibrated" in printed
     # the file that failed is named on the terminal with its reason
     assert any("broken.csv: load_error: " in line for line in printed.splitlines())
+    rows = list(csv.DictReader(table.open()))
+    assert [r["file"] for r in rows] == [r["path"] for r in doc["results"]]
+    for row, res in zip(rows, doc["results"], strict=True):
+        assert row["status"] == res["status"]
+        if res["status"] == "ok":
+            assert float(row["alpha_x"]) == res["params"][0]  # repr round-trips a float
+            assert float(row["se_beta_z"]) == res["stderr"][8]
+        else:
+            assert row["message"] == res["message"] and row["alpha_x"] == ""
+    pd = pytest.importorskip("pandas")
+    frame = to_dataframe(doc["results"])
+    assert isinstance(frame, pd.DataFrame) and len(frame) == 6
+    ok = frame[frame.status == "ok"]
+    np.testing.assert_array_equal(
+        ok["S_xy"], [r["params"][3] for r in doc["results"] if r["status"] == "ok"]
+    )
 
 
 def test_batch_cli_bad_directory(tmp_path, capsys):

@@ -326,6 +326,11 @@ class Diagnosis:
         ).split()
         return _jsonable({k: getattr(self, k) for k in keys})
 
+    def _repr_html_(self) -> str:
+        from ..display import diagnosis_html
+
+        return diagnosis_html(self)
+
     def summary(self) -> str:
         u, f = {"accel": (" mg", 1e3), "mag": (" %", 1e2)}.get(self.sensor, (" deg", 180 / math.pi))
         if self.verdict == "not_possible":

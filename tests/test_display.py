@@ -1,0 +1,152 @@
+"""Issue 18: results as Jupyter shows them. Every result's ``_repr_html_`` is well-formed HTML
+that holds its numbers (each parameter and standard error as the table prints them), its
+status and its warnings (escaped); plain ``repr`` stays one short line; a batch result is a
+table with one row per sensor whose numbers are the result's own."""
+
+from html.parser import HTMLParser
+
+import numpy as np
+import pytest
+
+from calib_jax.calibration import AccelCalibration
+from calib_jax.models.layout import PARAM_NAMES
+
+from .test_input_checks import _accel_cal, _mag_cal
+
+VOID = {"br", "hr", "img", "meta", "input"}
+
+
+class _Balance(HTMLParser):
+    """Checks that every opened tag is closed, in order."""
+
+    def __init__(self):
+        super().__init__()
+        self.stack: list[str] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        assert self.stack and self.stack[-1] == tag, (tag, self.stack)
+        self.stack.pop()
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def _parsed_text(html: str) -> str:
+    p = _Balance()
+    p.feed(html)
+    p.close()
+    assert p.stack == [], p.stack
+    return " ".join(p.text)
+
+
+def test_accel_html_holds_the_table_status_and_escaped_warnings():
+    cal = _accel_cal(warnings=["only 5 poses < 9 parameters"], notes=["read as g"])
+    html = cal._repr_html_()
+    text = _parsed_text(html)
+    for i, name in enumerate(PARAM_NAMES):
+        assert name in text
+        assert f"{cal.params[i]:.6g}" in text and f"{cal.stderr[i]:.6g}" in text
+    assert "ok" in text and "only 5 poses < 9 parameters" in text  # decoded from &lt;
+    assert "&lt;" in html and "< 9" not in html
+    assert "read as g" in text
+    r = repr(cal)
+    assert "\n" not in r and len(r) < 250 and "status='ok'" in r
+
+
+def test_mag_and_marg_html():
+    from calib_jax.marg import MARGRecord
+
+    mag = _mag_cal(warnings=["coverage 40 %"])
+    text = _parsed_text(mag._repr_html_())
+    for v in (*mag.center, *mag.stderr_center, *mag.soft_iron.ravel(), *mag.semi_axes):
+        assert f"{v:.6g}" in text
+    assert "coverage 40 %" in text
+    assert len(repr(mag)) < 250 and "\n" not in repr(mag)
+    rec = MARGRecord(
+        accel=_accel_cal(),
+        accel_method="static",
+        mag=mag,
+        R_mag_to_acc=np.eye(3),
+        permutation="x <- +x, y <- +y, z <- +z",
+        permutation_matrix=np.eye(3),
+        rotation_deg=0.5,
+        dip_deg=60.0,
+        dip_stderr_deg=0.1,
+        dip_std_before_deg=2.0,
+        dip_std_after_deg=0.3,
+        n_used=900,
+        n_total=1000,
+        alignment_status="ok",
+        alignment_message="converged",
+        status="ok",
+    )
+    text = _parsed_text(rec._repr_html_())
+    assert "AccelCalibration" in text and "MagCalibration" in text and "dip 60.00" in text
+
+
+def test_diagnosis_html_has_the_steps_and_the_candidates():
+    from calib_jax.diagnose import Diagnosis
+
+    steps = [
+        {"added_effect": None, "n_params": 9, "rms": 2e-3, "loo_rms": 2.1e-3, "bic": -500.0},
+        {"added_effect": "bias_drift", "n_params": 12, "rms": 5e-4, "loo_rms": 6e-4, "bic": -700.0},
+    ]
+    rounds = [
+        [
+            {"effect": "bias_drift", "accepted": True, "delta_bic": 200.0, "loo_gain": 0.7,
+             "tests": {"bic": True, "loo": True}},
+            {"effect": "temperature", "accepted": False, "delta_bic": 3.0, "loo_gain": 0.01,
+             "tests": {"bic": False, "loo": False}},
+        ]
+    ]  # fmt: skip
+    d = Diagnosis(
+        sensor="accel", verdict="effects_added", steps=steps, effects=["bias_drift"],
+        rms_before=2e-3, rms_after=5e-4, noise_floor=4e-4, noise_floor_white=4e-4,
+        noise_floor_allan=4.5e-4, unexplained_structure=False, structure=[], notes=["n1"],
+        rejected=[], rounds=rounds, groups={}, n_observations=40, observations="intervals",
+        units="g",
+    )  # fmt: skip
+    text = _parsed_text(d._repr_html_())
+    assert "bias_drift" in text and "base" in text and "effects_added" in text
+    # each step's row: effect, parameters, rms and leave-one-out rms in mg, BIC
+    assert "base 9 2 2.1 -500" in text and "bias_drift 12 0.5 0.6 -700" in text
+    assert "temperature" in text and "bic, loo" in text  # the failed tests are named
+
+
+def test_batch_result_rows_are_its_numbers():
+    """BatchResult.rows / to_dataframe: one row per sensor, the parameters by name."""
+    import jax.numpy as jnp
+
+    from calib_jax.batch import BatchResult
+    from calib_jax.lm import Status
+
+    p = np.arange(18.0).reshape(2, 9) / 10 + 1
+    r = BatchResult(
+        params=jnp.asarray(p),
+        stderr=jnp.full((2, 9), 1e-3),
+        status=jnp.asarray([int(Status.CONVERGED_GRADIENT), int(Status.INSUFFICIENT_DATA)]),
+        rms=jnp.asarray([1e-3, np.nan]),
+        chi2=jnp.zeros(2),
+        iterations=jnp.asarray([5, 0]),
+        n_samples=jnp.asarray([400, 3]),
+    )
+    rows = r.rows(names=["a.csv", "b.csv"])
+    assert [row["sensor"] for row in rows] == ["a.csv", "b.csv"]
+    assert [row["status"] for row in rows] == ["ok", "failed"]
+    assert [rows[0][n] for n in PARAM_NAMES] == p[0].tolist()
+    text = _parsed_text(r._repr_html_())
+    assert "1 of 2 sensors converged" in text
+    pd = pytest.importorskip("pandas")
+    frame = r.to_dataframe()
+    assert isinstance(frame, pd.DataFrame) and frame.shape[0] == 2
+    np.testing.assert_array_equal(frame["beta_z"], p[:, 8])
+
+
+def test_accel_repr_is_not_the_dataclass_dump():
+    assert "covariance" not in repr(_accel_cal())
+    assert AccelCalibration.__repr__ is not object.__repr__
