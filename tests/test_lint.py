@@ -28,6 +28,18 @@ def test_ruff_check_passes():
     assert r.returncode == 0, r.stdout + r.stderr
 
 
+def test_notebooks_are_ruff_formatted():
+    """The .ipynb files are the notebooks' sources (no string builders): their code cells are
+    formatted as the package is (``ruff format notebooks/`` fixes a failure)."""
+    ruff = shutil.which("ruff", path=str(Path(sys.executable).parent)) or shutil.which("ruff")
+    if ruff is None:
+        pytest.skip("ruff is not installed (pip install -e '.[test]')")
+    r = subprocess.run(
+        [ruff, "format", "--check", "notebooks"], cwd=ROOT, capture_output=True, text=True
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
 def _modules():
     for info in pkgutil.walk_packages(calib_jax.__path__, "calib_jax."):
         yield importlib.import_module(info.name)
