@@ -57,6 +57,7 @@ from .models.mag import (
 )
 from .observations import screen_samples
 from .padding import pad_rows
+from .sphere import sphere_coverage  # noqa: F401  (re-exported: calib_jax.mag.sphere_coverage)
 
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
 MagModel = Literal["sphere", "diag", "full", "auto"]
@@ -149,20 +150,6 @@ def _shape_jacobian(model: str):
 
 # ---------------------------------------------------------------------------------------------
 # host side
-
-
-def sphere_coverage(dirs: np.ndarray, cells: int = 100) -> tuple[float, float, np.ndarray]:
-    """Coverage of unit directions (N, 3): the fraction of ``cells`` equal-area cells (a
-    Fibonacci lattice) holding at least one direction, the smallest eigenvalue of the
-    direction scatter (1/3 uniform, 0 planar) and its eigenvector (the unseen axis)."""
-    k = np.arange(cells) + 0.5
-    z = 1.0 - 2.0 * k / cells
-    phi = np.pi * (1.0 + 5**0.5) * k
-    rz = np.sqrt(1.0 - z * z)
-    grid = np.stack([rz * np.cos(phi), rz * np.sin(phi), z], axis=1)
-    hit = np.unique(np.argmax(dirs @ grid.T, axis=1))
-    evals, evecs = np.linalg.eigh(dirs.T @ dirs / len(dirs))
-    return len(hit) / cells, float(evals[0]), evecs[:, 0]
 
 
 def _vec(v: np.ndarray) -> str:

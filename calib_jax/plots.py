@@ -1,10 +1,25 @@
-"""Figures: static means against the unit sphere, and paper 1's (theta, phi) coverage map."""
+"""Figures, one look for every sensor (CLI ``--plot``, ``calib-jax demo``, notebooks).
+
+Three panels read at a glance:
+
+1. where the data are: the directions on an equal-area map of the sphere (azimuth against
+   cos(polar angle), so equal areas look equal), coloured by the error after calibration, with
+   the empty cells of the coverage measure (:func:`calib_jax.sphere.sphere_coverage`, 100
+   equal-area cells) marked;
+2. the error against time (interval or sample order), before and after: drift and outliers
+   show here;
+3. the error histogram before and after, over the whole range of the data (nothing clipped).
+
+The functions return the matplotlib Figure (no pyplot: the caller's backend is left alone)
+and write it to ``path`` when one is given.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .calibration import AccelCalibration
+from .sphere import cell_hits, sphere_cells
 
 
 def spherical_angles(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -15,79 +30,114 @@ def spherical_angles(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return theta, phi
 
 
-def plot_accel(cal: AccelCalibration, path: str) -> None:
-    """Write a two-panel figure to ``path``.
+def error_bins(*errors: np.ndarray, max_bins: int = 80) -> np.ndarray:
+    """Histogram edges spanning every finite value of all ``errors`` (no clipping)."""
+    x = np.concatenate([np.ravel(e) for e in errors])
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return np.linspace(-1.0, 1.0, 3)
+    lo, hi = float(x.min()), float(x.max())
+    if hi <= lo:
+        lo, hi = lo - 0.5 * abs(lo or 1.0), hi + 0.5 * abs(hi or 1.0)
+    return np.linspace(lo, hi, max_bins + 1)
 
-    Left: static-interval means before (nominal conversion) and after calibration, divided by g,
-    with the unit sphere. Right: the 2-D projection (theta, phi) of the corrected means,
-    showing which orientations the log covers.
-    """
-    from matplotlib.figure import Figure  # no pyplot: leaves the caller's backend alone
+
+def _panels(fig, dirs, before, after, *, what: str, order: str, scale: float, unit: str):
+    """The three panels of the module docstring on ``fig``."""
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    hits = cell_hits(dirs)
+    gaps = sphere_cells()[hits == 0]
+    th, ph = spherical_angles(dirs)
+    ax = fig.add_subplot(1, 3, 1)
+    sc = ax.scatter(ph, np.cos(np.radians(th)), c=after * scale, cmap="coolwarm", s=8)
+    fig.colorbar(sc, ax=ax, label=f"error after ({unit})")
+    if len(gaps):
+        gth, gph = spherical_angles(gaps)
+        ax.scatter(
+            gph, np.cos(np.radians(gth)), marker="x", color="0.35", s=40, label="empty cell"
+        )
+        ax.legend(loc="lower left", fontsize=7)
+    ax.set_xlim(-180, 180)
+    ax.set_ylim(-1, 1)
+    ax.set_xlabel("azimuth (deg)")
+    ax.set_ylabel("cos(polar angle) (equal area)")
+    n_empty = int(np.sum(hits == 0))
+    ax.set_title(
+        f"coverage {100 - n_empty} % of 100 equal-area cells ({n_empty} empty, x)", fontsize=9
+    )
+    ax.grid(alpha=0.3)
+
+    ax2 = fig.add_subplot(1, 3, 2)
+    k = np.arange(len(after))
+    ax2.plot(k, before * scale, ".", ms=3, color="tab:red", label="before")
+    ax2.plot(k, after * scale, ".", ms=3, color="tab:blue", label="after")
+    ax2.axhline(0, color="0.5", lw=0.6)
+    ax2.set_xlabel(order)
+    ax2.set_ylabel(f"{what} ({unit})")
+    ax2.set_title("error against time", fontsize=9)
+    ax2.legend(fontsize=7)
+
+    ax3 = fig.add_subplot(1, 3, 3)
+    bins = error_bins(before * scale, after * scale)
+    ax3.hist(before * scale, bins=bins, alpha=0.6, color="tab:red", label="before")
+    ax3.hist(after * scale, bins=bins, alpha=0.6, color="tab:blue", label="after")
+    ax3.set_xlabel(f"{what} ({unit})")
+    ax3.set_title("error histogram (full range)", fontsize=9)
+    ax3.legend(fontsize=7)
+    fig.tight_layout()
+
+
+def plot_accel(cal: AccelCalibration, path: str | None = None):
+    """Static-interval means: directions and gaps, |a|/g - 1 against interval order, and its
+    histogram, before (the nominal conversion) and after calibration."""
+    from matplotlib.figure import Figure
 
     raw_means = cal.static_means
     before = (raw_means - cal.nominal_offset) / cal.nominal_scale / cal.g
     after = cal.apply(raw_means) / cal.g
-    fig = Figure(figsize=(11, 5))
-    ax = fig.add_subplot(1, 2, 1, projection="3d")
-    u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
-    ax.plot_wireframe(
-        np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.8", linewidth=0.4
+    e_before = np.linalg.norm(before, axis=1) - 1.0
+    e_after = np.linalg.norm(after, axis=1) - 1.0
+    fig = Figure(figsize=(15, 4.6))
+    _panels(
+        fig, after, e_before, e_after,
+        what="|a|/g - 1", order="static interval (time order)", scale=1e3, unit="mg",
+    )  # fmt: skip
+    fig.suptitle(
+        f"accelerometer: RMS(|a|/g - 1) {cal.rms_before:.2e} -> {cal.rms_after:.2e} over "
+        f"{len(after)} static means; status {cal.status}",
+        fontsize=10,
     )
-    ax.scatter(*before.T, color="tab:red", s=14, label="raw (nominal scale)")
-    ax.scatter(*after.T, color="tab:blue", s=14, label="calibrated")
-    ax.set_xlabel("x / g")
-    ax.set_ylabel("y / g")
-    ax.set_zlabel("z / g")
-    ax.set_title(
-        f"static means: RMS(|a|/g - 1) {cal.rms_before:.2e} -> {cal.rms_after:.2e}", fontsize=9
-    )
-    ax.legend(loc="upper left", fontsize=8)
-    ax2 = fig.add_subplot(1, 2, 2)
-    th, ph = spherical_angles(after)
-    err = np.linalg.norm(after, axis=1) - 1.0
-    sc = ax2.scatter(ph, th, c=err * 1e6, cmap="coolwarm", s=30)
-    fig.colorbar(sc, ax=ax2, label="|a|/g - 1 after (ppm)")
-    ax2.set_xlim(-180, 180)
-    ax2.set_ylim(180, 0)
-    ax2.set_xlabel("phi (deg)")
-    ax2.set_ylabel("theta (deg)")
-    ax2.set_title(f"coverage: {len(after)} static means (paper 1, 2-D projection)", fontsize=9)
-    ax2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
 
 
-def plot_mag(cal, raw: np.ndarray, path: str) -> None:
-    """Paper 2 Fig. 8: raw samples (centred on their mean, scaled to the radius) and the
-    compensated ones, with the sphere; plus the histogram of |m| / radius before and after."""
-    from matplotlib.figure import Figure  # no pyplot: leaves the caller's backend alone
+def plot_mag(cal, raw: np.ndarray, path: str | None = None):
+    """Samples (at most 5,000, evenly spaced in time): directions after compensation and
+    gaps, |m|/r - 1 against sample order, and its histogram, before (centred on the mean,
+    scaled to its mean norm, as ``rms_before_pct``) and after."""
+    from matplotlib.figure import Figure
 
     raw = np.asarray(raw, float)
     raw = raw[np.all(np.isfinite(raw), axis=1)]
-    step = max(1, len(raw) // 3000)
-    raw = raw[::step]
+    raw = raw[:: max(1, len(raw) // 5000)]
     centred = raw - raw.mean(axis=0)
-    before = centred / np.linalg.norm(centred, axis=1).mean()
-    after = cal.apply(raw) / cal.radius
-    fig = Figure(figsize=(11, 5))
-    ax = fig.add_subplot(1, 2, 1, projection="3d")
-    u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
-    ax.plot_wireframe(
-        np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.8", linewidth=0.4
+    r_before = np.linalg.norm(centred, axis=1)
+    e_before = r_before / r_before.mean() - 1.0
+    after = cal.apply(raw)
+    e_after = np.linalg.norm(after, axis=1) / cal.radius - 1.0
+    fig = Figure(figsize=(15, 4.6))
+    _panels(
+        fig, after, e_before, e_after,
+        what="|m|/r - 1", order="sample (time order)", scale=1e2, unit="%",
+    )  # fmt: skip
+    fig.suptitle(
+        f"{cal.sensor} ({cal.model} ellipsoid): RMS radial error {cal.rms_before_pct:.2f} % -> "
+        f"{cal.rms_after_pct:.2f} % over {cal.n_samples} samples; status {cal.status}",
+        fontsize=10,
     )
-    ax.scatter(*before.T, color="tab:blue", s=2, alpha=0.5, label="raw (centred, scaled)")
-    ax.scatter(*after.T, color="tab:red", s=2, alpha=0.5, label="compensated")
-    ax.set_box_aspect((1, 1, 1))
-    ax.set_title(f"{cal.model} ellipsoid, {cal.n_samples} samples", fontsize=9)
-    ax.legend(loc="upper left", fontsize=8)
-    ax2 = fig.add_subplot(1, 2, 2)
-    bins = np.linspace(0.5, 1.5, 101)
-    ax2.hist(np.linalg.norm(before, axis=1), bins=bins, alpha=0.6, label="raw")
-    ax2.hist(np.linalg.norm(after, axis=1), bins=bins, alpha=0.6, label="compensated")
-    ax2.set_xlabel("|m| / radius")
-    ax2.set_title(
-        f"RMS radial error {cal.rms_before_pct:.2f} % -> {cal.rms_after_pct:.2f} %", fontsize=9
-    )
-    ax2.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig

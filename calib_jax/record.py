@@ -10,7 +10,7 @@ each device's accumulated accelerometer data and reports what paper 1's protocol
   degrees; the accelerometer reads the upward specific force);
 * octants of the sphere of directions no pose has visited yet;
 * for a magnetometer, the share of the sphere of field directions covered
-  (:func:`calib_jax.mag.sphere_coverage`, 100 equal-area cells) and the faces not yet seen.
+  (:func:`calib_jax.sphere.sphere_coverage`, 100 equal-area cells) and the faces not yet seen.
 
 With ``resume``, the rows already in a log count towards its coverage (they are calibrated
 too). A log this session wrote nothing into is not calibrated as if it were this session's.
@@ -204,7 +204,7 @@ def assess_coverage(
     elif sensor in ("accel", "marg"):
         kw.update(octants_missing=_octants_missing(np.zeros((0, 3))))
     if sensor in ("mag", "marg") and mag is not None and len(mag) >= 8:
-        from .mag import sphere_coverage
+        from .sphere import sphere_coverage
 
         m = np.asarray(mag, float)
         m = m[np.all(np.isfinite(m), axis=1)]

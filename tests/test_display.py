@@ -150,3 +150,33 @@ def test_batch_result_rows_are_its_numbers():
 def test_accel_repr_is_not_the_dataclass_dump():
     assert "covariance" not in repr(_accel_cal())
     assert AccelCalibration.__repr__ is not object.__repr__
+
+
+def test_figures_mark_the_gaps_and_clip_nothing(tmp_path):
+    """The coverage panel marks exactly the empty cells of the coverage measure; the histogram
+    spans every error (an outlier at +40 % is inside its range, where the old 0.5-1.5 bins
+    dropped it); the figure is written."""
+    from calib_jax.plots import plot_accel, plot_mag
+    from calib_jax.sphere import cell_hits
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(60, 3))
+    d[:, 2] = np.abs(d[:, 2])  # upper hemisphere only: half the cells empty
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    cal = _accel_cal(static_means=d * 1.01 + 0.01)
+    fig = plot_accel(cal, str(tmp_path / "a.png"))
+    assert (tmp_path / "a.png").stat().st_size > 10_000
+    after = cal.apply(cal.static_means)
+    empty = int(np.sum(cell_hits(after / np.linalg.norm(after, axis=1, keepdims=True)) == 0))
+    assert 30 < empty < 70
+    gap_marks = [c for c in fig.axes[0].collections if c.get_label() == "empty cell"]
+    assert len(gap_marks) == 1 and len(gap_marks[0].get_offsets()) == empty
+
+    raw = rng.normal(size=(2000, 3))
+    raw = raw / np.linalg.norm(raw, axis=1, keepdims=True) * 44.3
+    raw[7] *= 1.4  # an outlier 40 % out
+    mag = _mag_cal(center=np.zeros(3), soft_iron=np.eye(3), radius=44.3)
+    fig = plot_mag(mag, raw)
+    [hist] = [a for a in fig.axes if "histogram" in a.get_title()]
+    edges = [p.get_x() for p in hist.patches] + [p.get_x() + p.get_width() for p in hist.patches]
+    assert min(edges) <= 0.0 and max(edges) >= 39.0  # percent: the outlier is in range
