@@ -305,9 +305,12 @@ def fit_accel(
     update_type, max_iter : static
         Paper 1's lambda scheme (1, 2, 3) and the iteration budget.
 
-    Returns a :class:`Fit` whose ``params`` (:class:`AccelParams`) are differentiable in
-    ``raw``, ``magnitude`` and ``weights`` by the implicit function theorem. Jittable and
-    vmappable (see :func:`fit_batch`); one compile per (N, dtype, static options).
+    Returns
+    -------
+    Fit
+        Its ``params`` (:class:`AccelParams`) are differentiable in ``raw``, ``magnitude``
+        and ``weights`` by the implicit function theorem. Jittable and vmappable (see
+        :func:`fit_batch`); one compile per (N, dtype, static options).
     """
     raw, g, w = _prepare(raw, magnitude, weights)
     g_ok = _magnitude_ok(g)
