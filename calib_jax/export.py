@@ -32,7 +32,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -133,6 +133,27 @@ def _ellipsoid(cal: MagCalibration) -> Correction:
         status=cal.status,
         source=cal.source,
     )
+
+
+def correction_from_result(r: dict) -> Correction:
+    """The correction of one fleet result (:func:`calib_jax.fleet.calibrate_files`, or an entry
+    of ``calib-jax batch --json``): 9 parameters are paper 1's accelerometer vector, 12 the
+    ellipsoid's centre and W (row-major). A ValueError for a file that was not calibrated."""
+    if r.get("status") != "ok" or not r.get("params"):
+        raise ValueError(
+            f"{r.get('path')}: not calibrated ({r.get('status')}: {r.get('message', '')}); "
+            "there is no correction to export"
+        )
+    p = np.asarray(r["params"], float)
+    units = r.get("units")
+    if p.size == 9:
+        out = None if units == "counts" else units  # counts are fitted to the reference g
+        c = Correction("accel", np.linalg.inv(p[ALPHA_INDEX]), p[6:9], units, out)
+    elif p.size == 12:
+        c = Correction("mag", p[3:].reshape(3, 3), p[:3], units, units)
+    else:
+        raise ValueError(f"{r.get('path')}: {p.size} parameters are neither accel (9) nor mag (12)")
+    return _checked(replace(c, status="ok", source=r.get("path")), r.get("path"))
 
 
 def _from_dict(d: dict, where) -> dict[str, Correction]:

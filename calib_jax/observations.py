@@ -152,7 +152,7 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
     found = f"found {report.n_intervals} static intervals with {setting}"
     if tried > 1:
         found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
-    if tried > 1 and not any(c.n_poses for c in on_sphere) and len(on_sphere) < tried:
+    if tried > 1 and most <= 1 and len(on_sphere) < tried:
         found += (
             f" (no setting's interval means lay on one ellipsoid within {100 * SPHERE_RMS:g} % "
             "of its radius: the log looks like one pose held throughout, or motion throughout)"

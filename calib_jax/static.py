@@ -234,6 +234,10 @@ class StaticReport:
                 f"{MIN_POSES} distinct poses to score"
             ),
             "given": "as given",
+            "most_poses": (
+                f"none of {len(self.candidates)} candidates found {MIN_POSES} distinct poses to "
+                "score; kept the one that found the most"
+            ),
         }[self.how]
         stride = f", on every {self.stride}th sample" if self.stride > 1 else ""
         return (
@@ -894,6 +898,11 @@ def detect_static(
                 break
             means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
             rms, n_poses, off = ellipsoid_score(means)
+            if not np.isfinite(rms) and len(a) >= 2:
+                # too few means for an ellipsoid: count the raw means' own directions (the
+                # bias is small next to the reference), so a short log of a few poses says how
+                # many it holds instead of "no static interval"
+                n_poses = _count_directions(means)
             n_held, n_split = _splits(means[~off], cut[~off]) if len(a) else (0, 0)
             n_kept = int(len(a) - off.sum())
             ok = np.isfinite(rms) and n_kept >= MIN_POSES and n_poses >= MIN_POSES
@@ -907,6 +916,16 @@ def detect_static(
             covered.append(int(np.sum(b - a)))
 
     best = _choose(candidates, covered)
+    few = None  # nothing scorable, but some setting found several poses: keep the one with most
+    if best is None and not single and max((c.n_poses for c in candidates), default=0) >= 2:
+        most = max(c.n_poses for c in candidates)
+
+        def rank(i: int):
+            c = candidates[i]
+            spread = abs(np.log((c.factor or DEFAULT_FACTOR) / DEFAULT_FACTOR))
+            return (-spread, c.n_held, -c.n_split)
+
+        few = max((i for i, c in enumerate(candidates) if c.n_poses == most), key=rank)
 
     if single:
         how, chosen = "given", None
@@ -914,6 +933,9 @@ def detect_static(
     elif best is not None:
         how, chosen = "sweep", best
         w, f, thr, noise = settings[best]
+    elif few is not None:
+        how, chosen = "most_poses", few
+        w, f, thr, noise = settings[few]
     else:  # nothing scorable: the classic setting (or the closest to it in the grid)
         how = "default"
         w0 = window or (

@@ -13,6 +13,8 @@ NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.i
 def test_notebook_runs(path, tmp_path, monkeypatch):
     # notebook 05 takes every 3rd row of its BROAD excerpts here (the kernel inherits this)
     monkeypatch.setenv("CALIB_JAX_NB_STEP", "3")
+    # notebook 07 calibrates a fleet of 100 simulated logs here (1,000 when run by hand)
+    monkeypatch.setenv("CALIB_JAX_NB_FLEET", "100")
     nb = nbformat.read(path, as_version=4)
     NotebookClient(
         nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}

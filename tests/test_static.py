@@ -253,7 +253,24 @@ def test_board_that_never_moved_is_not_a_pose_table():
         cj.calibrate_accel(flat)
     msg = str(e.value)
     assert "pose table" not in msg
-    assert "the most distinct poses any found was 0" in msg and "one pose held" in msg
+    # one pose: settings whose few means fit no ellipsoid count their raw directions (1)
+    assert "the most distinct poses any found was 1" in msg and "one pose held" in msg
     # an ADC's offset (analog sensor, 512 counts at 0 g, 100 counts per g) is still a table
     adc = np.round(512 + 100 * random_directions(50, 2))
     assert looks_like_pose_table(adc)
+
+
+def test_a_log_cut_short_says_too_few_poses_not_no_interval():
+    """Five poses of 1.5 s (a board put down early): no sweep setting finds the 12 poses the
+    score needs, and the classic 1 s window leaves nothing after trimming; the detector keeps
+    the setting that found the most poses, so the error names the real cause (too few poses)
+    instead of "no static interval ... hold each pose still" (found by notebook 07's fleet)."""
+    log = simulate_accel(random_params(49), samples_per_pose=150, transition_samples=40,
+                         noise=2e-3, rng=49)  # fmt: skip
+    x = log.raw[: 5 * 190]
+    rep = detect_static(x, sample_rate=100.0)
+    assert rep.how == "most_poses" and 4 <= rep.n_intervals <= 8
+    with pytest.raises(ValueError, match="distinct poses") as e:
+        cj.calibrate_accel(x, sample_rate=100.0)
+    assert "no static interval" not in str(e.value)
+    assert "the most distinct poses any found was 5" in str(e.value)
