@@ -105,7 +105,7 @@ def apply_calibration(
     corr = corrections(cal)
     if isinstance(log, SensorLog):
         fixed = correct_log(corr, log)
-        return fixed if out is None else _write(out, [(_columns(fixed), 0)], fixed, corr, False)
+        return fixed if out is None else _write(out, [(_columns(fixed), 0)], log, corr, False)
     if out is None:
         return correct_log(corr, load_log(log, columns=columns, sample_rate=sample_rate))
     if Path(out).resolve() == Path(log).resolve():
