@@ -161,14 +161,27 @@ def _chunks(items: list, size: int) -> Iterator[list]:
         yield items[i : i + size]
 
 
+def _in_notebook() -> bool:
+    """True inside a Jupyter kernel (not merely when IPython or ipykernel is imported, as
+    they are in a test runner that executes notebooks)."""
+    ipython = sys.modules.get("IPython")
+    shell = ipython.get_ipython() if ipython is not None else None
+    return type(shell).__name__ == "ZMQInteractiveShell"
+
+
 def progress_bar(total: int, enabled: bool | None, desc: str):
     """A ``tqdm.auto`` bar (a widget in Jupyter, a line on a terminal). ``enabled=None``:
-    shown on a terminal or in a notebook kernel, hidden when output goes to a file or pipe."""
+    shown on a terminal or in a notebook kernel, hidden when output goes to a file or pipe.
+    tqdm's monitor thread is not started (it only retunes ``miniters`` of stalled bars, and
+    a thread left behind in the caller's process is a side effect)."""
     from tqdm.auto import tqdm
 
+    class Bar(tqdm):
+        monitor_interval = 0
+
     if enabled is None:
-        enabled = sys.stderr.isatty() or "ipykernel" in sys.modules
-    return tqdm(total=total, desc=desc, unit="file", disable=not enabled, leave=True)
+        enabled = sys.stderr.isatty() or _in_notebook()
+    return Bar(total=total, desc=desc, unit="file", disable=not enabled, leave=True)
 
 
 def calibrate_files(
