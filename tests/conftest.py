@@ -128,3 +128,23 @@ def sim48():
 @pytest.fixture(scope="session")
 def rng():
     return np.random.default_rng(1234)
+
+
+@pytest.fixture
+def default_sigint():
+    """Python's own SIGINT handling for a test that presses a real Ctrl-C: the default
+    handler, SIGINT not blocked. Yields what the worker process had before (a fresh-clone CI
+    run on this machine twice saw the recorder's Ctrl-C tests run to their time limit, as if
+    SIGINT were ignored or blocked there; the assertion messages print this state)."""
+    import signal
+
+    before = signal.getsignal(signal.SIGINT)
+    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT])
+    try:
+        yield f"SIGINT handler before the test: {before!r}, blocked: {blocked}"
+    finally:
+        signal.signal(signal.SIGINT, before)
+        if blocked:
+            signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT])

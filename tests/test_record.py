@@ -85,7 +85,7 @@ def test_file_names():
 # recording from simulated boards
 
 
-def test_ctrl_c_stops_flushes_and_calibrates(tmp_path, tol):
+def test_ctrl_c_stops_flushes_and_calibrates(tmp_path, tol, default_sigint):
     """A real SIGINT to this process while recording: the session stops as interrupted, the log
     holds every line read, in order, and what was recorded calibrates."""
     board, link = _start_board(tmp_path, "imu")
@@ -118,7 +118,7 @@ def test_ctrl_c_stops_flushes_and_calibrates(tmp_path, tol):
         )
     finally:
         _stop(board)
-    assert session.reason == "interrupted"
+    assert session.reason == "interrupted", default_sigint
     stats = session.devices[0].reader.stats
     truth = json.loads((tmp_path / "imu.json").read_text())
     header, rows, tail = _log_rows(out)

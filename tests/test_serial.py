@@ -402,7 +402,7 @@ def test_record_stops_on_ctrl_c_with_the_log_flushed(tmp_path):
     np.testing.assert_array_equal(rec.data.acc, np.array(rows)[:, 1:])
 
 
-def test_record_on_a_real_ctrl_c_logs_each_line_once(tmp_path):
+def test_record_on_a_real_ctrl_c_logs_each_line_once(tmp_path, default_sigint):
     """SIGINT lands wherever the reading loop is (parsing, flushing): the log still holds the
     lines from the first on, each once, in whole rows."""
     master, slave = os.openpty()
@@ -445,7 +445,7 @@ def test_record_on_a_real_ctrl_c_logs_each_line_once(tmp_path):
         writer.join(10)
         os.close(master)
         os.close(slave)
-    assert rec.status == "interrupted"
+    assert rec.status == "interrupted", default_sigint
     header, rows, tail = _log_rows(tmp_path / "c.csv")
     assert header == ["t", "ax", "ay", "az"] and tail == ""
     assert 100 <= len(rows) == rec.stats.lines_logged
