@@ -42,6 +42,19 @@ def error_bins(*errors: np.ndarray, max_bins: int = 80) -> np.ndarray:
     return np.linspace(lo, hi, max_bins + 1)
 
 
+def _figure(dirs, before, after, *, title: str, path, what: str, order: str, scale, unit):
+    """The three panels of the module docstring, titled, written to ``path`` if given."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(15, 4.6))
+    _panels(fig, dirs, before, after, what=what, order=order, scale=scale, unit=unit)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
 def _panels(fig, dirs, before, after, *, what: str, order: str, scale: float, unit: str):
     """The three panels of the module docstring on ``fig``."""
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -53,9 +66,7 @@ def _panels(fig, dirs, before, after, *, what: str, order: str, scale: float, un
     fig.colorbar(sc, ax=ax, label=f"error after ({unit})")
     if len(gaps):
         gth, gph = spherical_angles(gaps)
-        ax.scatter(
-            gph, np.cos(np.radians(gth)), marker="x", color="0.35", s=40, label="empty cell"
-        )
+        ax.scatter(gph, np.cos(np.radians(gth)), marker="x", color="0.35", s=40, label="empty cell")
         ax.legend(loc="lower left", fontsize=7)
     ax.set_xlim(-180, 180)
     ax.set_ylim(-1, 1)
@@ -90,35 +101,25 @@ def _panels(fig, dirs, before, after, *, what: str, order: str, scale: float, un
 def plot_accel(cal: AccelCalibration, path: str | None = None):
     """Static-interval means: directions and gaps, |a|/g - 1 against interval order, and its
     histogram, before (the nominal conversion) and after calibration."""
-    from matplotlib.figure import Figure
-
     raw_means = cal.static_means
     before = (raw_means - cal.nominal_offset) / cal.nominal_scale / cal.g
     after = cal.apply(raw_means) / cal.g
     e_before = np.linalg.norm(before, axis=1) - 1.0
     e_after = np.linalg.norm(after, axis=1) - 1.0
-    fig = Figure(figsize=(15, 4.6))
-    _panels(
-        fig, after, e_before, e_after,
+    title = (
+        f"accelerometer: RMS(|a|/g - 1) {cal.rms_before:.2e} -> {cal.rms_after:.2e} over "
+        f"{len(after)} static means; status {cal.status}"
+    )
+    return _figure(
+        after, e_before, e_after, title=title, path=path,
         what="|a|/g - 1", order="static interval (time order)", scale=1e3, unit="mg",
     )  # fmt: skip
-    fig.suptitle(
-        f"accelerometer: RMS(|a|/g - 1) {cal.rms_before:.2e} -> {cal.rms_after:.2e} over "
-        f"{len(after)} static means; status {cal.status}",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-    return fig
 
 
 def plot_mag(cal, raw: np.ndarray, path: str | None = None):
     """Samples (at most 5,000, evenly spaced in time): directions after compensation and
     gaps, |m|/r - 1 against sample order, and its histogram, before (centred on the mean,
     scaled to its mean norm, as ``rms_before_pct``) and after."""
-    from matplotlib.figure import Figure
-
     raw = np.asarray(raw, float)
     raw = raw[np.all(np.isfinite(raw), axis=1)]
     raw = raw[:: max(1, len(raw) // 5000)]
@@ -127,17 +128,11 @@ def plot_mag(cal, raw: np.ndarray, path: str | None = None):
     e_before = r_before / r_before.mean() - 1.0
     after = cal.apply(raw)
     e_after = np.linalg.norm(after, axis=1) / cal.radius - 1.0
-    fig = Figure(figsize=(15, 4.6))
-    _panels(
-        fig, after, e_before, e_after,
+    title = (
+        f"{cal.sensor} ({cal.model} ellipsoid): RMS radial error {cal.rms_before_pct:.2f} % -> "
+        f"{cal.rms_after_pct:.2f} % over {cal.n_samples} samples; status {cal.status}"
+    )
+    return _figure(
+        after, e_before, e_after, title=title, path=path,
         what="|m|/r - 1", order="sample (time order)", scale=1e2, unit="%",
     )  # fmt: skip
-    fig.suptitle(
-        f"{cal.sensor} ({cal.model} ellipsoid): RMS radial error {cal.rms_before_pct:.2f} % -> "
-        f"{cal.rms_after_pct:.2f} % over {cal.n_samples} samples; status {cal.status}",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-    return fig
