@@ -111,13 +111,13 @@ def apply_calibration(
     if Path(out).resolve() == Path(log).resolve():
         raise ValueError(f"--out {out} is the log itself: write the corrected log elsewhere")
     head = load_log(log, columns=columns, sample_rate=sample_rate, max_rows=chunk_rows)
-    _plan(corr, head)  # refuse before writing anything
+    use, _ = _plan(corr, head)  # refuse before writing anything
     if head.layout is None and len(head) >= chunk_rows:
         head = load_log(log, columns=columns, sample_rate=sample_rate)  # compressed: whole
     if head.layout is None or len(head) < chunk_rows:
         fixed = correct_log(corr, head)
         return _write(out, [(_columns(fixed), 0)], head, corr, False)
-    return _write(out, _stream(log, head, corr, chunk_rows), head, corr, True)
+    return _write(out, _stream(log, head, use, chunk_rows), head, corr, True)
 
 
 def _columns(log: SensorLog) -> dict[str, np.ndarray]:
@@ -134,11 +134,11 @@ def _columns(log: SensorLog) -> dict[str, np.ndarray]:
     return cols
 
 
-def _stream(path, head: SensorLog, corr, chunk_rows: int):
-    """The whole file in blocks, as (output columns, rows skipped), corrected, in order."""
+def _stream(path, head: SensorLog, use: dict[str, Correction], chunk_rows: int):
+    """The whole file in blocks, as (output columns, rows skipped), corrected, in order
+    (``use``: the correction of each of the log's triads, from :func:`_plan`)."""
     lay = head.layout
     src = lay["source"]
-    use, _ = _plan(corr, head)
     for block, bad in iter_rows(path, lay, chunk_rows):
         part = SensorLog(acc=None)
         if "t" in src:
