@@ -40,7 +40,14 @@ from .linalg import cholesky_small, eigh_small, inv3
 from .lm import LMResult, Status, lm_solve, optx_solve
 from .mag import ellipsoid_start_moments
 from .models.accel import alpha_matrix
-from .models.mag import N_PARAMS, log_radius_scale, natural_radius, soft_iron_matrix, unpack
+from .models.mag import (
+    N_PARAMS,
+    log_radius_scale,
+    natural_radius,
+    raw_calibration,
+    raw_covariance,
+    unpack,
+)
 
 MIN_SAMPLES = 20
 FLAT = 1e-3  # smallest / largest eigenvalue of the direction scatter: below is one plane
@@ -287,15 +294,13 @@ def _mag_one(S, mean, k, field, model, solver, options, min_points):
     p0 = ellipsoid_start_moments(S, model)
     n = S[9, 9]
     res = _solve(lambda p: mag_theta(p, model), p0, S, n - N_PARAMS[model], solver, options)
-    c_n, M_n = unpack(res.params, model)
-    center = mean + k * c_n
-    M = M_n / (k * k)
-    radius = jnp.where(jnp.isnan(field), natural_radius(M), field)
-    W = soft_iron_matrix(M, radius)
+    _, M_n = unpack(res.params, model)
+    center, W = raw_calibration(res.params, model, mean, k, field)
     # e = r_n (q - 1) ~ 2 r_n (|y| / r - 1) in normalised units
     rms = jnp.sqrt(res.chi2 / jnp.maximum(n, 1.0)) / (2.0 * natural_radius(M_n))
     params = jnp.concatenate([center, W.ravel()])
-    stderr = jnp.concatenate([k * res.stderr[-3:], jnp.full(9, jnp.nan, S.dtype)])
+    cov = raw_covariance(res.params, res.covariance, model, mean, k, field)
+    stderr = jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
     return params, stderr, jnp.where(pre >= 0, pre, res.status), rms, res, pre >= 0
 
 
@@ -465,8 +470,8 @@ def calibrate_mag_batch(
 
     ``params`` (S, 12) is [center (3), W (9, row-major)]: y = W (raw - center) has magnitude
     ``field`` (a positive number, or one per sensor; or det W = 1 without it). ``stderr``
-    holds the centre's standard errors (the first three entries); the W entries are NaN (use
-    calibrate_mag for them). The model is fixed (no automatic choice in a batch).
+    holds their standard errors in the same order (those of :func:`calib_jax.calibrate_mag`,
+    from the moment-form chi2). The model is fixed (no automatic choice in a batch).
     """
     if model not in N_PARAMS:
         raise ValueError(f"model must be one of {tuple(N_PARAMS)}, got {model!r}")

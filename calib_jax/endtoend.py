@@ -30,12 +30,12 @@ import numpy as np
 
 from .align import align_mag_to_accel
 from .lm import LMResult, lm_solve
+from .models.accel import alpha_matrix
 from .padding import bucket, pad_rows
 from .pipeline import (
     MagParams,
     MargParams,
     Rotation,
-    _sym,
     attitude,
     block_covariance,
     fit_mag,
@@ -87,7 +87,8 @@ def pack(params: MargParams, dip_deg: float | jax.Array) -> jax.Array:
 
 def unpack(theta: jax.Array, base: MargParams) -> MargParams:
     """The calibration block (12,) -> MargParams (the accelerometer from ``base``)."""
-    W = _sym(theta[3:9])
+    # symmetric W from paper 1's alpha layout [xx yy zz xy xz yz] (the zeros fill the bias)
+    W = alpha_matrix(jnp.concatenate([theta[3:9], jnp.zeros(3, theta.dtype)]))
     return MargParams(base.acc, MagParams(theta[:3], W), Rotation(theta[9:12]))
 
 

@@ -31,6 +31,7 @@ import functools
 import warnings as _warnings
 from typing import Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -42,6 +43,7 @@ from .geometry import (
     sphere_fit,
     sphere_fit_moments,
 )
+from .implicit import solve_implicit
 from .io.files import SensorLog
 from .lm import LMResult, fit_status, is_converged, lm_solve, optx_solve, status_message
 from .models.mag import (
@@ -52,7 +54,8 @@ from .models.mag import (
     pack,
     quadric_residual,
     radial_error,
-    soft_iron_matrix,
+    raw_calibration,
+    raw_covariance,
     unpack,
 )
 from .observations import screen_samples
@@ -111,12 +114,21 @@ def ellipsoid_start_moments(S: jax.Array, model: str) -> jax.Array:
 
 
 def fit_ellipsoid_normalized(
-    x: jax.Array, w: jax.Array, model: str = "full", solver: str = "lm1", **options
+    x: jax.Array,
+    w: jax.Array,
+    model: str = "full",
+    solver: str = "lm1",
+    implicit: bool = False,
+    **options,
 ) -> LMResult:
     """Pure core: fit the quadric residual to unit-scale data x (N, 3) with weights w (N,).
 
-    Jittable and vmappable over sensors; ``model``, ``solver`` and ``options`` are static.
-    Returns the LMResult of the packed parameters (see :mod:`calib_jax.models.mag`).
+    The one ellipsoid fit: :func:`calibrate_mag` calls it on normalised samples,
+    :func:`calib_jax.pipeline.fit_mag` with ``implicit=True`` (then ``params`` are
+    differentiable in x and w by the implicit function theorem,
+    :func:`calib_jax.implicit.solve_implicit`; LM solvers only). Jittable and vmappable over
+    sensors; ``model``, ``solver``, ``implicit`` and ``options`` are static. Returns the
+    LMResult of the packed parameters (see :mod:`calib_jax.models.mag`).
     """
     p0 = ellipsoid_start(x, w, model)
 
@@ -124,8 +136,15 @@ def fit_ellipsoid_normalized(
         return quadric_residual(p, data[0], model)
 
     if solver == "optimistix":
+        if implicit:
+            raise ValueError("implicit=True needs an LM solver (lm1, lm2, lm3)")
         return optx_solve(residual, p0, (x, w), weights=w, **options)
     update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
+    if implicit:
+        p, res = solve_implicit(
+            residual, p0, (x, w), weights=lambda d: d[1], update_type=update_type, **options
+        )
+        return eqx.tree_at(lambda r: r.params, res, p)
     return lm_solve(residual, p0, (x, w), weights=w, update_type=update_type, **options)
 
 
@@ -137,15 +156,15 @@ def _compiled(solver: str, model: str, options: tuple):
 
 
 @functools.lru_cache(maxsize=8)
-def _shape_jacobian(model: str):
-    """d(centre, W / radius)/dp for the standard errors of centre and soft-iron matrix."""
+def _raw_calibration(model: str):
+    """Jitted (c, W, covariance of [c, ravel W]) from a normalised fit (see
+    :func:`calib_jax.models.mag.raw_calibration`)."""
 
-    def f(p):
-        c, M = unpack(p, model)
-        W = soft_iron_matrix(M, natural_radius(M))
-        return jnp.concatenate([c, W.ravel()])
+    def f(p, cov, mean, scale, field):
+        c, W = raw_calibration(p, model, mean, scale, field)
+        return c, W, raw_covariance(p, cov, model, mean, scale, field)
 
-    return jax.jit(jax.jacfwd(f))
+    return jax.jit(f)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -329,10 +348,12 @@ def calibrate_mag(
         chosen = model
     res, c_n, M_n, _, _ = fits[chosen]
 
-    centre = mean + s * c_n
     M = M_n / s**2
+    c, W, cov_cw = _raw_calibration(chosen)(
+        res.params, res.covariance, mean, s, np.nan if field is None else float(field)
+    )
+    centre, W = np.asarray(c), np.asarray(W)
     radius = float(field) if field is not None else float(natural_radius(jnp.asarray(M)))
-    W = np.asarray(soft_iron_matrix(jnp.asarray(M), radius))
     if np.all(np.isfinite(M)):
         evals, R = np.linalg.eigh(M)
         if np.linalg.det(R) < 0:
@@ -342,13 +363,10 @@ def calibrate_mag(
     with np.errstate(invalid="ignore"):
         semi_axes = 1.0 / np.sqrt(evals)  # NaN for a non-ellipsoid (an eigenvalue <= 0)
 
-    # standard errors: centre in raw units, W relative (d(W/r)) times the radius
-    Jc = np.asarray(_shape_jacobian(chosen)(res.params))
-    cov_n = np.asarray(res.covariance, float)
-    cov_cw = Jc @ cov_n @ Jc.T
-    se = np.sqrt(np.clip(np.diag(cov_cw), 0.0, None))
-    stderr_center = s * se[:3]
-    stderr_soft_iron = (radius * se[3:]).reshape(3, 3)
+    # standard errors of the returned centre (raw units) and W (output units per raw unit)
+    se = np.sqrt(np.clip(np.diag(np.asarray(cov_cw)), 0.0, None))
+    stderr_center = se[:3]
+    stderr_soft_iron = se[3:].reshape(3, 3)
     se_n = np.asarray(res.stderr, float)
 
     solver_status = int(res.status)

@@ -53,11 +53,10 @@ from jaxtyping import Array, Float, Int
 
 from .accel import fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
-from .implicit import solve_implicit
 from .lm.status import CONVERGED_STATUSES, Status
-from .mag import ellipsoid_start
-from .models.accel import AccelParams, alpha_matrix
-from .models.mag import sqrtm_spd, unpack
+from .mag import fit_ellipsoid_normalized
+from .models.accel import AccelParams
+from .models.mag import natural_radius, raw_calibration, raw_covariance, unpack
 from .rotations import euler_zyx_deg, rotvec_to_dcm
 
 __all__ = [
@@ -82,15 +81,6 @@ __all__ = [
 
 # ---------------------------------------------------------------------------------------------
 # calibrations
-
-
-def _sym(v: jax.Array) -> jax.Array:
-    """[xx, yy, zz, xy, xz, yz] -> symmetric 3x3 (paper 1's alpha layout)."""
-    return alpha_matrix(jnp.concatenate([v, jnp.zeros(3, v.dtype)]))
-
-
-def _sym_vec(S: jax.Array) -> jax.Array:
-    return jnp.stack([S[0, 0], S[1, 1], S[2, 2], S[0, 1], S[0, 2], S[1, 2]])
 
 
 class MagParams(eqx.Module):
@@ -211,16 +201,6 @@ def _normalisation(raw, w):
     return jax.lax.stop_gradient(m), jax.lax.stop_gradient(s)
 
 
-def _mag_residual(p, args):
-    x, _, field = args
-    y = (x - p[6:9]) @ _sym(p[:6]).T
-    return jnp.sqrt(jnp.sum(y * y, axis=-1)) / field - 1.0
-
-
-def _weights(args):
-    return args[1]
-
-
 def _prepare(raw, magnitude, weights):
     raw = jnp.asarray(raw)
     if raw.ndim != 2 or raw.shape[-1] != 3:
@@ -269,8 +249,7 @@ def _float_dtype(raw: jax.Array):
     return raw.dtype if jnp.issubdtype(raw.dtype, jnp.floating) else jnp.float64
 
 
-def _finish(params, res, D, raw, w, magnitude):
-    cov = D @ res.covariance @ D.T
+def _finish(params, res, cov, raw, w, magnitude):
     e = residual(params, raw, magnitude)
     rms = jnp.sqrt(jnp.sum(w * e * e) / jnp.sum(w))
     return Fit(params=params, covariance=cov, status=res.status, rms=rms, iterations=res.iterations)
@@ -332,8 +311,8 @@ def fit_accel(
     # back to raw units: alpha = s alpha_n, beta = s beta_n + m (exact for the model)
     p = jnp.concatenate([s * pn[:6], s * pn[6:] + m])
     params = AccelParams.from_vector(p)
-    D = s * jnp.eye(9, dtype=raw.dtype)
-    return _fail_if(_finish(params, res, D, raw, w, g), g_ok)
+    cov = s * s * res.covariance
+    return _fail_if(_finish(params, res, cov, raw, w, g), g_ok)
 
 
 def fit_mag(
@@ -341,44 +320,51 @@ def fit_mag(
     magnitude: float | jax.Array = 1.0,
     weights: Float[Array, " N"] | None = None,
     *,
+    model: str = "full",
     update_type: int = 1,
     max_iter: int = 100,
     absolute_sigma: bool = False,
 ) -> Fit:
-    """Hard and soft iron of one magnetometer: minimise sum w (|W (m' - c)| - B)^2 over c and
-    symmetric W (9 parameters, the full ellipsoid of paper 2), from paper 2's constrained
-    algebraic ellipsoid.
+    """Hard and soft iron of one magnetometer: paper 2's ellipsoid (x - c)' M (x - c) = 1,
+    fitted by :func:`calib_jax.calibrate_mag`'s core
+    (:func:`calib_jax.mag.fit_ellipsoid_normalized`, the quadric residual from the constrained
+    algebraic ellipsoid), returned as the map onto a sphere of radius ``magnitude``:
+    c and the symmetric W = B M^(1/2), so that |W (m' - c)| = B on the ellipsoid. The same
+    samples give :func:`calib_jax.calibrate_mag`'s parameters (``model`` and ``field=B``).
 
     ``magnitude`` B is the field the output should have (1 for unit vectors, the local field in
     uT, ...); positive and finite, checked as in :func:`fit_accel` (ValueError when concrete;
-    status FAILED and NaN ``params`` under ``jit``). Returns a :class:`Fit` with
-    :class:`MagParams`, differentiable in ``raw``, ``magnitude`` and ``weights``; jittable and
-    vmappable. Needs a well-covered sphere of orientations (see :func:`calib_jax.calibrate_mag`
-    for the coverage checks and the smaller sphere/diag models that partial coverage calls for).
+    status FAILED and NaN ``params`` under ``jit``). ``model`` (static): "full" (9
+    parameters), "diag" (an axis-aligned ellipsoid) or "sphere" (hard iron only). With
+    ``absolute_sigma=True`` the weights are 1 / sigma^2, sigma the noise of |W (m' - c)| / B.
+    Returns a :class:`Fit` with :class:`MagParams`, differentiable in ``raw``, ``magnitude``
+    and ``weights``; jittable and vmappable. Needs a well-covered sphere of orientations (see
+    :func:`calib_jax.calibrate_mag` for the coverage checks and the model choice).
     """
     raw, B, w = _prepare(raw, magnitude, weights)
     B_ok = _magnitude_ok(B)
     m, s = _normalisation(raw, w)
     x = (raw - m) / s
-    c0, M0 = unpack(ellipsoid_start(x, w, "full"), "full")
-    W0 = B * sqrtm_spd(M0)
-    p0 = jnp.concatenate([_sym_vec(W0), c0])
-    pn, res = solve_implicit(
-        _mag_residual,
-        p0,
-        (x, w, B),
-        weights=_weights,
-        update_type=update_type,
+    res = fit_ellipsoid_normalized(
+        x,
+        w,
+        model,
+        solver=f"lm{update_type}",
+        implicit=True,
         max_iter=max_iter,
         absolute_sigma=absolute_sigma,
     )
-    # W (m' - c) = W_n (x - c_n) with x = (m' - m) / s: W = W_n / s, c = s c_n + m
-    W = _sym(pn[:6]) / s
-    c = s * pn[6:] + m
+
+    c, W = raw_calibration(res.params, model, m, s, B)
     params = MagParams(hard_iron=c, soft_iron=W)
-    # d(ravel(params))/d(pn): the covariance in the pytree's own coordinates
-    embed = jax.jacfwd(lambda q: jnp.concatenate([s * q[6:] + m, (_sym(q[:6]) / s).ravel()]))
-    return _fail_if(_finish(params, res, embed(pn), raw, w, B), B_ok)
+    cov = raw_covariance(jax.lax.stop_gradient(res.params), res.covariance, model, m, s, B)
+    if absolute_sigma:
+        # The quadric residual e = r (|u|^2 - 1) is 2 r (|u| - 1) to first order, |u| - 1 being
+        # the residual the weights are for (r = det(M_n)^(-1/6)): its covariance is 4 r^2 that
+        # of the fit with the weights as given
+        r = natural_radius(unpack(res.params, model)[1])
+        cov = 4.0 * jax.lax.stop_gradient(r) ** 2 * cov
+    return _fail_if(_finish(params, res, cov, raw, w, B), B_ok)
 
 
 def fit_batch(

@@ -118,7 +118,11 @@ def test_mag_batch_matches_calibrate_mag():
         np.testing.assert_allclose(
             np.asarray(r.params[k, 3:]).reshape(3, 3), cal.soft_iron, rtol=1e-8, atol=1e-10
         )
+        # the moment form sums the same chi2 in another order: standard errors to 1e-5
         np.testing.assert_allclose(np.asarray(r.stderr[k, :3]), cal.stderr_center, rtol=1e-5)
+        np.testing.assert_allclose(
+            np.asarray(r.stderr[k, 3:]).reshape(3, 3), cal.stderr_soft_iron, rtol=1e-5
+        )
         assert float(r.rms[k]) == pytest.approx(cal.rms_after_pct / 100, rel=0.02)
 
 

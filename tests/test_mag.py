@@ -205,9 +205,10 @@ def test_recovers_random_ellipsoids(seed, noise, radius, tol):
     assert cal.status == "ok", cal.report()
     slack = 1e-4 * radius + 3 * noise**2 * radius
     assert np.all(np.abs(cal.center - c) < tol.N_SIGMA * cal.stderr_center + slack)
-    # W is dimensionless (per unit radius); its quadric bias grows with the noise seen through W
+    # W is dimensionless (output per raw unit, both in the radius's unit); its quadric bias
+    # grows with the noise seen through W
     w_slack = 1e-4 + 3 * (noise * np.abs(W).max()) ** 2
-    assert np.all(np.abs(cal.soft_iron - W) < tol.N_SIGMA * cal.stderr_soft_iron / radius + w_slack)
+    assert np.all(np.abs(cal.soft_iron - W) < tol.N_SIGMA * cal.stderr_soft_iron + w_slack)
     # the after-RMS is the raw noise seen through W: radially, noise * sqrt(tr(W W') / 3) on
     # average over directions (15 %: the sample RMS of 600 residuals and the direction mix)
     expected = 100 * noise * np.sqrt(np.trace(W @ W.T) / 3)

@@ -159,6 +159,40 @@ def natural_radius(M: jax.Array) -> jax.Array:
     return jnp.linalg.det(M) ** (-1.0 / 6.0)
 
 
+def raw_calibration(
+    p: Float[Array, " n"], model: str, mean: jax.Array, scale: jax.Array, field: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """(c, W) in raw units from the packed parameters of a fit to x = (raw - mean) / scale.
+
+    c = mean + scale c_n. W = radius M^(1/2) with M = M_n / scale^2: radius ``field`` (the
+    output then has that magnitude), or, where ``field`` is NaN, det(M)^(-1/6) (det W = 1,
+    dimensionless whatever the raw unit). The one definition of the magnetometer's (c, W):
+    differentiate it for their standard errors (:func:`calib_jax.calibrate_mag`, the batch
+    and :func:`calib_jax.pipeline.fit_mag` all do).
+    """
+    c_n, M_n = unpack(p, model)
+    k = jnp.where(jnp.isnan(field), natural_radius(M_n), field / scale)
+    return mean + scale * c_n, k * sqrtm_spd(M_n)
+
+
+def raw_covariance(
+    p: Float[Array, " n"],
+    covariance: Float[Array, "n n"],
+    model: str,
+    mean: jax.Array,
+    scale: jax.Array,
+    field: jax.Array,
+) -> Float[Array, "12 12"]:
+    """Covariance of [c, ravel(W)] (:func:`raw_calibration`) from that of the packed
+    parameters, to first order."""
+    J = jax.jacfwd(
+        lambda q: jnp.concatenate(
+            [a.ravel() for a in raw_calibration(q, model, mean, scale, field)]
+        )
+    )(p)
+    return J @ covariance @ J.T
+
+
 def compensate(params: EllipsoidParams, raw: jax.Array, radius: jax.Array) -> jax.Array:
     """Paper 2's compensation of raw samples (..., 3) onto the sphere of ``radius``."""
     W = soft_iron_matrix(params.shape, radius)
