@@ -310,15 +310,18 @@ def calibrate_mag(
     opts = tuple(sorted((solver_options or {}).items()))
     candidates = MAG_MODELS if model == "auto" else (model,)
     n = len(xn)
-    fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float]] = {}
+    # model -> (result, c_n, M_n, mean square radial error in units of s, BIC, mean square
+    # relative radial error |W (x - c)| / r - 1)
+    fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float, float]] = {}
     for m in candidates:
         res = _fit(xn, m, solver, opts)
         c_n, M_n = unpack(res.params, m)
-        # radial error in units of s (not relative to the fitted radius: see quadric_residual)
-        e = np.asarray(radial_error(c_n, M_n, jnp.asarray(xn)) * natural_radius(M_n))
-        ms = float(np.mean(e**2))
+        # the BIC's radial error is in units of s, not relative to the fitted radius (which a
+        # misfitting model lowers by growing: see quadric_residual)
+        rel = np.asarray(radial_error(c_n, M_n, jnp.asarray(xn)))
+        ms = float(np.mean((rel * float(natural_radius(M_n))) ** 2))
         bic = n * np.log(max(ms, 1e-300)) + N_PARAMS[m] * np.log(n)
-        fits[m] = (res, np.asarray(c_n), np.asarray(M_n), ms, bic)
+        fits[m] = (res, np.asarray(c_n), np.asarray(M_n), ms, bic, float(np.mean(rel**2)))
     usable = {
         m: f
         for m, f in fits.items()
@@ -331,13 +334,14 @@ def calibrate_mag(
     selection = {
         m: {
             "bic": f[4],
-            "rms_pct": 100 * np.sqrt(f[3]),
+            "rms_pct": 100 * np.sqrt(f[5]),
             "usable": m in usable,
             "well_determined": m in determined,
         }
         for m, f in fits.items()
     }
-    # rms_pct: RMS radial error in percent of the data's RMS radius s
+    # rms_pct: the RMS of |W (x - c)| / r - 1 in percent, what the chosen model reports as
+    # rms_after_pct
     if model == "auto":
         # the lowest BIC among fits that converged to a bounded ellipsoid; sphere otherwise
         pool = determined or usable
@@ -346,7 +350,7 @@ def calibrate_mag(
             warn.append("no candidate model is well determined by these data")
     else:
         chosen = model
-    res, c_n, M_n, _, _ = fits[chosen]
+    res, c_n, M_n = fits[chosen][:3]
 
     M = M_n / s**2
     c, W, cov_cw = _raw_calibration(chosen)(
@@ -416,7 +420,7 @@ def calibrate_mag(
             res_f = _fit(xn, "full", solver, opts)
             c_f, M_f = unpack(res_f.params, "full")
             e_f = np.asarray(radial_error(c_f, M_f, jnp.asarray(xn)) * natural_radius(M_f))
-            fits["full"] = (res_f, np.asarray(c_f), np.asarray(M_f), float(np.mean(e_f**2)), 0)
+            fits["full"] = (res_f, np.asarray(c_f), np.asarray(M_f), float(np.mean(e_f**2)), 0, 0)
         return float(100 * np.sqrt(fits["full"][3]))
 
     status = _plausibility(
