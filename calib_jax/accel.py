@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import warnings as _warnings
+from collections.abc import Callable
 from typing import Literal
 
 import equinox as eqx
@@ -164,7 +165,7 @@ def fit_normalized(
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(solver: str, model: str, options: tuple) -> callable:
+def _compiled(solver: str, model: str, options: tuple) -> Callable:
     return jax.jit(functools.partial(fit_normalized, solver=solver, model=model, **dict(options)))
 
 

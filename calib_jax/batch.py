@@ -31,7 +31,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 
 from .accel import MODELS as ACCEL_MODELS
 from .accel import _units_from_norm, initial_guess_moments
@@ -107,7 +107,7 @@ def reference_for_log(norm: float, g=None) -> float:
     return float(g)
 
 
-def quadric_theta(Q: jax.Array, c: jax.Array, scale: jax.Array) -> jax.Array:
+def quadric_theta(Q: jax.Array, c: jax.Array, scale: float | jax.Array) -> jax.Array:
     """theta such that phi(x)' theta = scale ((x - c)' Q (x - c) - 1)."""
     Qc = Q @ c
     return scale * jnp.concatenate(
@@ -408,10 +408,10 @@ def shard_batch(x: jax.Array) -> jax.Array:
 
 
 def calibrate_accel_batch(
-    raw: Float[Array, "S N 3"],
-    mask: Bool[Array, "S N"] | None = None,
+    raw: Real[ArrayLike, "S N 3"],
+    mask: Shaped[ArrayLike, "S N"] | None = None,
     *,
-    g: float = 1.0,
+    g: float | Float[ArrayLike, " S"] = 1.0,
     model: str = "accel9",
     solver: str = "lm1",
     solver_options: dict | None = None,
@@ -457,10 +457,10 @@ def calibrate_accel_batch(
 
 
 def calibrate_mag_batch(
-    raw: Float[Array, "S N 3"],
-    mask: Bool[Array, "S N"] | None = None,
+    raw: Real[ArrayLike, "S N 3"],
+    mask: Shaped[ArrayLike, "S N"] | None = None,
     *,
-    field: float | None = None,
+    field: float | Float[ArrayLike, " S"] | None = None,
     model: str = "full",
     solver: str = "lm1",
     solver_options: dict | None = None,

@@ -198,7 +198,7 @@ def ellipsoid_from_quadric(S: jax.Array) -> tuple[jax.Array, jax.Array, jax.Arra
     return centre, A, R, 1.0 / jnp.sqrt(evals)
 
 
-def compensation_matrix(R: jax.Array, semi_axes: jax.Array, radius: jax.Array) -> jax.Array:
+def compensation_matrix(R: jax.Array, semi_axes: jax.Array, radius: float | jax.Array) -> jax.Array:
     """Paper 2's compensation as one matrix: rotate into the ellipsoid's axes (R'), scale each
     axis to the sphere of ``radius``, rotate back (R). Equals ``radius * sqrtm(M)``."""
     return (R * (radius / semi_axes)) @ R.T

@@ -148,3 +148,22 @@ def default_sigint():
         signal.signal(signal.SIGINT, before)
         if blocked:
             signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT])
+
+
+@pytest.fixture(autouse=True)
+def _unchecked_if_wrong_types(request):
+    """Tests marked ``wrong_types`` pass arguments that break calib_jax's annotations on
+    purpose, to check calib_jax's own error message (what a user without a type checker gets);
+    jaxtyping's runtime checker (pyproject addopts) would stop them first, so it is off for
+    them."""
+    if request.node.get_closest_marker("wrong_types") is None:
+        yield
+        return
+    import jaxtyping
+
+    before = jaxtyping.config.jaxtyping_disable
+    jaxtyping.config.update("jaxtyping_disable", True)
+    try:
+        yield
+    finally:
+        jaxtyping.config.update("jaxtyping_disable", before)

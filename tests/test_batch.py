@@ -126,6 +126,7 @@ def test_mag_batch_matches_calibrate_mag():
         assert float(r.rms[k]) == pytest.approx(cal.rms_after_pct / 100, rel=0.02)
 
 
+@pytest.mark.wrong_types
 def test_bad_input_errors():
     with pytest.raises(ValueError, match="sensors, samples, 3"):
         calibrate_accel_batch(np.zeros((10, 3)))

@@ -202,6 +202,7 @@ def test_general_residual_exponential_fit(update_type):
     np.testing.assert_allclose(r.params, ref.x, rtol=1e-7)
 
 
+@pytest.mark.wrong_types
 def test_bad_arguments_raise_with_the_fix():
     with pytest.raises(ValueError, match="update_type"):
         lm_solve(sphere, P0, jnp.ones((20, 3)), update_type=4)

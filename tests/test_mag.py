@@ -283,6 +283,7 @@ def test_bad_input(bad, match):
         calibrate_mag(bad)
 
 
+@pytest.mark.wrong_types
 def test_bad_options():
     x, _, _ = ellipsoid_points(0)
     with pytest.raises(ValueError, match="model must be"):

@@ -101,6 +101,7 @@ def test_explicit_settings_override_the_sweep():
     assert rep.factor is None and rep.threshold == 1e-4 and rep.trim == 0
 
 
+@pytest.mark.wrong_types
 @pytest.mark.parametrize(
     "kw, match",
     [

@@ -9,7 +9,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ..linalg import cholesky_small, eigh_small
 from .status import is_converged, status_message
@@ -62,7 +62,7 @@ class LMResult(eqx.Module):
 
 
 def uncertainty(
-    jtwj: Float[Array, "n n"], reduced_chi2: Float[Array, ""], absolute_sigma: bool
+    jtwj: Float[Array, "n n"], reduced_chi2: Float[ArrayLike, ""], absolute_sigma: bool
 ) -> tuple[Float[Array, "n n"], Float[Array, " n"], Float[Array, "n n"], Float[Array, ""]]:
     """Covariance, standard errors, correlation and condition number from J'WJ.
 
@@ -99,7 +99,7 @@ def uncertainty(
 
 
 def uncertainty_cholesky(
-    jtwj: Float[Array, "n n"], reduced_chi2: Float[Array, ""], absolute_sigma: bool
+    jtwj: Float[Array, "n n"], reduced_chi2: Float[ArrayLike, ""], absolute_sigma: bool
 ) -> tuple[Float[Array, "n n"], Float[Array, " n"], Float[Array, "n n"], Float[Array, ""]]:
     """:func:`uncertainty` by a Cholesky factorisation instead of an eigen-decomposition.
 

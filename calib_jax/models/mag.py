@@ -31,7 +31,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from ..linalg import inv3
 
@@ -127,7 +127,7 @@ def radial_error(centre: jax.Array, M: jax.Array, x: jax.Array) -> jax.Array:
     return jnp.sqrt(jnp.maximum(jnp.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
 
 
-def sqrtm_spd(M: jax.Array, iterations: int = 12) -> jax.Array:
+def sqrtm_spd(M: Float[ArrayLike, "3 3"], iterations: int = 12) -> jax.Array:
     """Principal square root of a 3x3 SPD matrix by Denman-Beavers iterations.
 
     Smooth in M (unlike a Jacobi eigen-decomposition, whose derivative through the rotation
@@ -148,19 +148,23 @@ def sqrtm_spd(M: jax.Array, iterations: int = 12) -> jax.Array:
     return Y * jnp.sqrt(s)
 
 
-def soft_iron_matrix(M: jax.Array, radius: jax.Array) -> jax.Array:
+def soft_iron_matrix(M: Float[ArrayLike, "3 3"], radius: float | jax.Array) -> jax.Array:
     """W = radius * M^(1/2), symmetric: maps centred raw data onto the sphere of ``radius``."""
     return radius * sqrtm_spd(M)
 
 
-def natural_radius(M: jax.Array) -> jax.Array:
+def natural_radius(M: Float[ArrayLike, "3 3"]) -> jax.Array:
     """det(M)^(-1/6): the radius that keeps det W = 1 (MATLAB magcal's convention), i.e. the
     geometric mean of the semi-axes, in raw units."""
     return jnp.linalg.det(M) ** (-1.0 / 6.0)
 
 
 def raw_calibration(
-    p: Float[Array, " n"], model: str, mean: jax.Array, scale: jax.Array, field: jax.Array
+    p: Float[Array, " n"],
+    model: str,
+    mean: Float[ArrayLike, "3"],
+    scale: Float[ArrayLike, ""],
+    field: Float[ArrayLike, ""],
 ) -> tuple[jax.Array, jax.Array]:
     """(c, W) in raw units from the packed parameters of a fit to x = (raw - mean) / scale.
 
@@ -179,9 +183,9 @@ def raw_covariance(
     p: Float[Array, " n"],
     covariance: Float[Array, "n n"],
     model: str,
-    mean: jax.Array,
-    scale: jax.Array,
-    field: jax.Array,
+    mean: Float[ArrayLike, "3"],
+    scale: Float[ArrayLike, ""],
+    field: Float[ArrayLike, ""],
 ) -> Float[Array, "12 12"]:
     """Covariance of [c, ravel(W)] (:func:`raw_calibration`) from that of the packed
     parameters, to first order."""
@@ -193,7 +197,7 @@ def raw_covariance(
     return J @ covariance @ J.T
 
 
-def compensate(params: EllipsoidParams, raw: jax.Array, radius: jax.Array) -> jax.Array:
+def compensate(params: EllipsoidParams, raw: jax.Array, radius: float | jax.Array) -> jax.Array:
     """Paper 2's compensation of raw samples (..., 3) onto the sphere of ``radius``."""
     W = soft_iron_matrix(params.shape, radius)
     return (raw - params.center) @ W.T
