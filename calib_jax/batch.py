@@ -26,6 +26,7 @@ parameters agree with the sample-level fit to ~1e-10 relative (tests/test_batch.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -411,7 +412,7 @@ def calibrate_accel_batch(
     raw: Real[ArrayLike, "S N 3"],
     mask: Shaped[ArrayLike, "S N"] | None = None,
     *,
-    g: float | Float[ArrayLike, " S"] = 1.0,
+    g: float | Sequence[float] | Float[ArrayLike, " S"] = 1.0,
     model: str = "accel9",
     solver: str = "lm1",
     solver_options: dict | None = None,
@@ -460,7 +461,7 @@ def calibrate_mag_batch(
     raw: Real[ArrayLike, "S N 3"],
     mask: Shaped[ArrayLike, "S N"] | None = None,
     *,
-    field: float | Float[ArrayLike, " S"] | None = None,
+    field: float | Sequence[float] | Float[ArrayLike, " S"] | None = None,
     model: str = "full",
     solver: str = "lm1",
     solver_options: dict | None = None,

@@ -102,6 +102,61 @@ class AccelCalibration:
 
         return AccelParams.from_vector(jnp.asarray(self.params))
 
+    @classmethod
+    def from_fit(
+        cls,
+        fit,
+        points,
+        g: float,
+        *,
+        units: str = "g",
+        sensor_id: str | None = None,
+        source: str | None = None,
+    ) -> AccelCalibration:
+        """The record of a :func:`calib_jax.pipeline.fit_accel` result (one sensor), to save,
+        report or export like a :func:`calib_jax.calibrate_accel` result. ``points`` are the
+        (N, 3) readings it was fitted to, ``g`` the magnitude it was given and ``units`` its
+        unit. The status is the solver's: a pipeline fit has no pose detection, coverage or
+        plausibility checks (a note says so; give ``calibrate_accel`` the log for them)."""
+        from .lm.status import fit_status, status_message
+
+        p = np.asarray(fit.params.to_vector(), float)
+        cov = np.asarray(fit.covariance, float)
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = cov / np.outer(se, se)
+        x = np.asarray(points, float)
+        a = apply_params(p, x)
+        g = float(g)
+        norm = np.linalg.norm(x, axis=1)
+        code = int(fit.status)
+        return cls(
+            params=p,
+            stderr=se,
+            covariance=cov,
+            correlation=corr,
+            condition=float("nan"),
+            status=fit_status(code, bool(np.all(np.isfinite(p)))),
+            input_units=units,
+            output_units=units,
+            g=g,
+            solver="pipeline.fit_accel",
+            solver_status=code,
+            solver_message=status_message(code),
+            iterations=int(fit.iterations),
+            nfev=0,
+            use="points",
+            n_intervals=0,
+            n_points=len(x),
+            rms_before=float(np.sqrt(np.mean((norm / norm.mean() - 1.0) ** 2))),
+            rms_after=float(np.sqrt(np.mean((np.linalg.norm(a, axis=1) / g - 1.0) ** 2))),
+            noise_floor=float("nan"),
+            notes=["from calib_jax.pipeline.fit_accel: no pose detection or plausibility checks"],
+            static_means=x,
+            sensor_id=sensor_id,
+            source=source,
+        )
+
     def apply(self, raw) -> np.ndarray:
         """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for one
         reading (3,), many (N, 3), or a loaded log (:class:`calib_jax.io.SensorLog`: its
@@ -200,7 +255,7 @@ class AccelCalibration:
         write_json_atomic(path, self.to_dict())
 
     @classmethod
-    def from_dict(cls, d: dict, source: str | Path | None = None) -> AccelCalibration:
+    def from_dict(cls, d: object, source: str | Path | None = None) -> AccelCalibration:
         """Rebuild from :meth:`to_dict`'s layout, validated: a ValueError names ``source``
         (the file), the key and what is wrong (missing, not a number, non-finite, a zero
         gain, a singular gain matrix, a non-positive g)."""
@@ -303,7 +358,7 @@ def _find_token(o, key: str = "") -> tuple[str, str] | None:
     return None
 
 
-def _read_json(path: str | Path) -> dict:
+def _read_json(path: str | Path) -> object:
     try:
         d = json.loads(Path(path).read_text(), parse_constant=_Token)
     except json.JSONDecodeError as exc:
@@ -539,7 +594,7 @@ class MagCalibration:
     units: str | None = None
     sensor: str = "mag"
     model_selection: dict = _field(default_factory=dict)
-    """Per candidate model: BIC and RMS radial error (percent of the RMS data radius)."""
+    """Per candidate model: BIC and the RMS of |W (x - c)| / radius - 1 in percent."""
     poorly_determined: list[str] = _field(default_factory=list)
     warnings: list[str] = _field(default_factory=list)
     """Problems a user should act on (rows left out, saturation, coverage, plausibility)."""
@@ -563,6 +618,85 @@ class MagCalibration:
         :func:`calib_jax.models.mag.compensate`."""
         x = _raw_vectors(raw, "acc" if self.sensor == "accel" else "mag")
         return (x - self.center) @ self.soft_iron.T
+
+    def to_params(self):
+        """The calibration as a JAX pytree, :class:`calib_jax.pipeline.MagParams` (c, W) with
+        the same ``apply``, for use inside jitted pipelines (JAX is imported here, not when a
+        file is read)."""
+        import jax.numpy as jnp
+
+        from .pipeline import MagParams
+
+        return MagParams(hard_iron=jnp.asarray(self.center), soft_iron=jnp.asarray(self.soft_iron))
+
+    @classmethod
+    def from_fit(
+        cls,
+        fit,
+        raw,
+        field: float,
+        *,
+        model: str = "full",
+        units: str | None = None,
+        sensor: str = "mag",
+        sensor_id: str | None = None,
+        source: str | None = None,
+    ) -> MagCalibration:
+        """The record of a :func:`calib_jax.pipeline.fit_mag` result (one sensor), to save,
+        report or export like a :func:`calib_jax.calibrate_mag` result: ``raw`` the (N, 3)
+        samples it was fitted to, ``field`` and ``model`` the magnitude and model it was given.
+        The status is the solver's: a pipeline fit has no coverage or plausibility checks (a
+        note says so)."""
+        from .lm.status import fit_status, status_message
+        from .sphere import sphere_coverage
+
+        c = np.asarray(fit.params.hard_iron, float)
+        W = np.asarray(fit.params.soft_iron, float)
+        se = np.sqrt(np.clip(np.diag(np.asarray(fit.covariance, float)), 0.0, None))
+        x = np.asarray(raw, float)
+        y = (x - c) @ W.T
+        r_y = np.linalg.norm(y, axis=1)
+        radius = float(field)
+        code = int(fit.status)
+        ok = bool(np.all(np.isfinite(W)))
+        if ok:
+            evals, R = np.linalg.eigh(W.T @ W / radius**2)
+            R = R * np.where(np.linalg.det(R) < 0, -1.0, 1.0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                axes = 1.0 / np.sqrt(evals)
+            cover = sphere_coverage(y / r_y[:, None])[0]
+        else:
+            axes, R, cover = np.full(3, np.nan), np.full((3, 3), np.nan), 0.0
+        r0 = np.linalg.norm(x - x.mean(axis=0), axis=1)
+        nr = np.linalg.norm(x, axis=1)
+        pct = lambda e: float(100 * np.sqrt(np.mean(e**2)))  # noqa: E731
+        return cls(
+            center=c,
+            soft_iron=W,
+            radius=radius,
+            model=model,
+            status=fit_status(code, ok),
+            rms_before_pct=pct(r0 / r0.mean() - 1.0),
+            rms_after_pct=pct(r_y / radius - 1.0),
+            semi_axes=axes,
+            dcm=R,
+            stderr_center=se[:3],
+            stderr_soft_iron=se[3:].reshape(3, 3),
+            condition=float("nan"),
+            solver="pipeline.fit_mag",
+            solver_status=code,
+            solver_message=status_message(code),
+            iterations=int(fit.iterations),
+            n_samples=len(x),
+            coverage=float(cover),
+            rms_raw_pct=pct(nr / nr.mean() - 1.0),
+            field=radius,
+            units=units,
+            sensor=sensor,
+            notes=["from calib_jax.pipeline.fit_mag: no coverage or plausibility checks"],
+            sensor_id=sensor_id,
+            source=source,
+        )
 
     def __eq__(self, other) -> bool:
         """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
@@ -661,7 +795,7 @@ class MagCalibration:
         write_json_atomic(path, self.to_dict())
 
     @classmethod
-    def from_dict(cls, d: dict, source: str | Path | None = None) -> MagCalibration:
+    def from_dict(cls, d: object, source: str | Path | None = None) -> MagCalibration:
         """Rebuild from :meth:`to_dict`'s layout, validated as :meth:`AccelCalibration.from_dict`
         (centre and W finite, W invertible, radius and field positive)."""
         r = _Doc(d, source)

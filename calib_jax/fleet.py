@@ -69,7 +69,7 @@ def prepare_log(
 
 
 def fit_prepared(
-    prepared: list[tuple[str, np.ndarray, dict]], sensor: str, options: dict
+    prepared: list[tuple[str | int, np.ndarray, dict]], sensor: str, options: dict
 ) -> list[dict]:
     """One batch fit of prepared logs ``(name, points, info)``: one result dict per log.
 

@@ -235,6 +235,36 @@ class MARGRecord:
 
         return marg_html(self)
 
+    def to_params(self):
+        """The board as a JAX pytree, :class:`calib_jax.pipeline.MargParams`, whose ``apply``
+        gives what this record's calibration gives: both sensors calibrated, the magnetometer
+        in the accelerometer's frame. The accelerometer's ellipsoid (``accel_method``
+        "ellipsoid") is the nine-parameter model with alpha = W^-1, beta = c (W is
+        symmetric); "none" is the identity. ``R_mag_to_acc`` becomes the rotation; an improper
+        axis map (a mirror, det -1), which no rotation is, goes into the magnetometer's W
+        instead and the rotation is the identity."""
+        import jax.numpy as jnp
+        from scipy.spatial.transform import Rotation as _R
+
+        from .models.accel import AccelParams
+        from .pipeline import MagParams, MargParams, Rotation
+
+        if isinstance(self.accel, AccelCalibration):
+            acc = self.accel.to_params()
+        elif isinstance(self.accel, MagCalibration):
+            alpha = np.linalg.inv(self.accel.soft_iron)
+            alpha = 0.5 * (alpha + alpha.T)
+            p = np.r_[np.diag(alpha), alpha[0, 1], alpha[0, 2], alpha[1, 2], self.accel.center]
+            acc = AccelParams.from_vector(jnp.asarray(p))
+        else:
+            acc = AccelParams.identity()
+        R = np.asarray(self.R_mag_to_acc, float)
+        mag = self.mag.to_params()
+        if np.linalg.det(R) > 0:
+            return MargParams(acc, mag, Rotation(jnp.asarray(_R.from_matrix(R).as_rotvec())))
+        folded = MagParams(mag.hard_iron, jnp.asarray(R @ np.asarray(mag.soft_iron)))
+        return MargParams(acc, folded, Rotation.identity())
+
     def alignment_text(self) -> str:
         """One line on the accel-mag rotation (the demo's wording)."""
         return (

@@ -49,7 +49,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int, Real
 
 from .accel import fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
@@ -256,7 +256,7 @@ def _finish(params, res, cov, raw, w, magnitude):
 
 
 def fit_accel(
-    raw: Float[Array, "N 3"],
+    raw: Real[ArrayLike, "N 3"],
     magnitude: float | jax.Array = 1.0,
     weights: Float[Array, " N"] | None = None,
     *,
@@ -316,7 +316,7 @@ def fit_accel(
 
 
 def fit_mag(
-    raw: Float[Array, "N 3"],
+    raw: Real[ArrayLike, "N 3"],
     magnitude: float | jax.Array = 1.0,
     weights: Float[Array, " N"] | None = None,
     *,
@@ -369,7 +369,7 @@ def fit_mag(
 
 def fit_batch(
     fit: Callable[..., Fit],
-    raw: Float[Array, "S N 3"],
+    raw: Real[ArrayLike, "S N 3"],
     magnitude: float | Float[Array, " S"] = 1.0,
     weights: Float[Array, "S N"] | None = None,
     **options,

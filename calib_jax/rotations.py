@@ -12,13 +12,14 @@ import itertools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 
-def quat_normalize(q: jax.Array) -> jax.Array:
+def quat_normalize(q: ArrayLike) -> jax.Array:
     return q / jnp.linalg.norm(q)
 
 
-def quat_multiply(p: jax.Array, q: jax.Array) -> jax.Array:
+def quat_multiply(p: ArrayLike, q: ArrayLike) -> jax.Array:
     """Hamilton product p (x) q."""
     pw, px, py, pz = p[0], p[1], p[2], p[3]
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
@@ -32,11 +33,11 @@ def quat_multiply(p: jax.Array, q: jax.Array) -> jax.Array:
     )
 
 
-def quat_conj(q: jax.Array) -> jax.Array:
+def quat_conj(q: ArrayLike) -> jax.Array:
     return q * jnp.array([1.0, -1.0, -1.0, -1.0], q.dtype)
 
 
-def quat_to_dcm(q: jax.Array) -> jax.Array:
+def quat_to_dcm(q: ArrayLike) -> jax.Array:
     """C(q) for a unit quaternion: v_nav = C v_body."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     return jnp.stack(
@@ -48,7 +49,7 @@ def quat_to_dcm(q: jax.Array) -> jax.Array:
     )
 
 
-def dcm_to_quat(C: jax.Array) -> jax.Array:
+def dcm_to_quat(C: ArrayLike) -> jax.Array:
     """Unit quaternion (w >= 0) of a rotation matrix, by the largest-pivot method (branch-free)."""
     tr = jnp.trace(C)
     cands = jnp.stack(
@@ -71,7 +72,7 @@ def dcm_to_quat(C: jax.Array) -> jax.Array:
     return jnp.where(q[0] < 0, -q, q)
 
 
-def rotvec_to_dcm(v: jax.Array) -> jax.Array:
+def rotvec_to_dcm(v: ArrayLike) -> jax.Array:
     """Rodrigues: the rotation by |v| radians about v (smooth at v = 0)."""
     th2 = v @ v
     th = jnp.sqrt(jnp.where(th2 > 0, th2, 1.0))
@@ -94,7 +95,7 @@ def rotation_angle_deg(C: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def euler_zyx_deg(q: jax.Array) -> jax.Array:
+def euler_zyx_deg(q: ArrayLike) -> jax.Array:
     """[roll, pitch, yaw] in degrees (ZYX: C = Rz(yaw) Ry(pitch) Rx(roll)) of body -> nav."""
     C = quat_to_dcm(q)
     roll = jnp.arctan2(C[2, 1], C[2, 2])
@@ -103,7 +104,7 @@ def euler_zyx_deg(q: jax.Array) -> jax.Array:
     return jnp.degrees(jnp.stack([roll, pitch, yaw]))
 
 
-def heading_inclination_error_deg(q_est: jax.Array, q_ref: jax.Array) -> jax.Array:
+def heading_inclination_error_deg(q_est: ArrayLike, q_ref: ArrayLike) -> jax.Array:
     """BROAD's error split of q_err = q_est (x) q_ref^-1 (earth frame): [heading, inclination].
 
     q_err = q_heading (x) q_incl with q_heading about the vertical (z); heading error is the

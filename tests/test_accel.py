@@ -179,6 +179,7 @@ def test_no_static_interval_is_an_error():
         cj.calibrate_accel(walk, threshold=1e-12, **DET)
 
 
+@pytest.mark.wrong_types
 def test_wrong_units_are_caught():
     # readings in m/s^2 (gains ~9.8 per unit of g), declared as g
     log = simulate_accel(

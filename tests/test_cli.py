@@ -1,5 +1,6 @@
 """The command line, run in-process (same code path as the console script)."""
 
+import argparse
 import contextlib
 import inspect
 import io
@@ -8,9 +9,9 @@ import os
 import subprocess
 import sys
 import tempfile
-import types
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -237,6 +238,15 @@ def test_marg_finds_a_swapped_magnetometer(tmp_path):
     np.testing.assert_allclose(d["R_mag_to_acc"], P, atol=5e-3)
     assert d["dip_deg"] == pytest.approx(sim.dip_deg, abs=0.2)
     assert any("permuted" in w for w in d["warnings"])
+    # the saved record as the JAX pipeline's pytree: the same calibrated pair, and the
+    # gravity-field angle of the simulated dip on every sample
+    rec = MARGRecord.load(out)
+    a, m = rec.to_params().apply(jnp.asarray(sim.acc), jnp.asarray(sim.mag))
+    np.testing.assert_allclose(a, rec.accel.apply(sim.acc), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(m, rec.mag.apply(sim.mag) @ rec.R_mag_to_acc.T, rtol=1e-9)
+    cos = np.sum(np.asarray(a) * np.asarray(m), 1) / np.linalg.norm(a, axis=1)
+    angle = np.degrees(np.arccos(cos / np.linalg.norm(m, axis=1)))
+    assert np.median(np.abs(angle - (90 + sim.dip_deg))) < 0.5, np.median(angle)
 
 
 BAD_OPTIONS = [
@@ -380,9 +390,9 @@ def test_internal_errors_and_interrupts_are_one_line(monkeypatch, capsys):
 def test_detector_options_reach_the_fit(monkeypatch):
     """Only the options given are passed (None keeps the detector automatic); --min-static
     is seconds with a rate and samples without."""
-    with_rate = types.SimpleNamespace(window=25, threshold_factor=None, min_static=0.5, block=None)
+    with_rate = argparse.Namespace(window=25, threshold_factor=None, min_static=0.5, block=None)
     assert cli.detector_options(with_rate, 100.0) == {"window": 25, "min_duration": 0.5}
-    no_rate = types.SimpleNamespace(window=None, threshold_factor=8.0, min_static=150.0)
+    no_rate = argparse.Namespace(window=None, threshold_factor=8.0, min_static=150.0)
     assert cli.detector_options(no_rate, None) == {"threshold_factor": 8.0, "min_samples": 150}
     seen = {}
 

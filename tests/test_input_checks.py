@@ -365,6 +365,7 @@ def test_recorder_calibration_json_on_a_full_disk(tmp_path, monkeypatch, capsys)
 # batch fits: reference magnitudes and masks
 
 
+@pytest.mark.wrong_types
 def test_batch_rejects_bad_magnitudes_and_masks():
     """g / field = 0, -1, NaN, inf (scalar or one per sensor) and a mask that is not boolean
     or 0/1 (a NaN in a float mask used to count as True) are each a ValueError naming the

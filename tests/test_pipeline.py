@@ -95,6 +95,7 @@ def test_fit_keeps_the_magnitude_unit(fits):
     assert abs(float(jnp.mean(jnp.linalg.norm(y, axis=1))) - 48.0) < 0.1
 
 
+@pytest.mark.wrong_types
 def test_bad_input_says_what_to_change():
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         pl.fit_accel(jnp.zeros((20, 2)))
@@ -455,3 +456,36 @@ def test_float32_runs_with_documented_accuracy(fits):
     e64 = pl.euler_deg(pl.attitude(mp64, jnp.asarray(A_TEST), jnp.asarray(M_TEST), DIP))
     assert e32.dtype == jnp.float32
     np.testing.assert_allclose(e32, e64, atol=5e-3)
+
+
+# ---------------------------------------------------------------------------------------------
+# records <-> pytrees
+
+
+def test_pipeline_fits_become_records_that_round_trip(fits, tmp_path):
+    """Issue 14: a pipeline Fit becomes the same record a calibrate_* call returns (from_fit),
+    which saves, loads, compares equal and converts back to the Fit's pytree exactly; its
+    standard errors are the Fit's, and for the magnetometer also calibrate_mag's on the same
+    samples (one core: to 1e-6 relative, the two normalise with their own sums)."""
+    fa, fm = fits
+    acc = cj.AccelCalibration.from_fit(fa, ACC, 1.0, sensor_id="board-1")
+    mag = cj.MagCalibration.from_fit(fm, MAG, 1.0, units="unit field")
+    assert acc.status == "ok" and mag.status == "ok"
+    assert any("no pose detection" in n for n in acc.notes)
+    for rec, fit in ((acc, fa), (mag, fm)):
+        path = tmp_path / f"{type(rec).__name__}.json"
+        rec.save(path)
+        back = type(rec).load(path)
+        assert back == rec
+        p = back.to_params()
+        for x, y in zip(jax.tree.leaves(p), jax.tree.leaves(fit.params), strict=True):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    np.testing.assert_allclose(acc.stderr, fa.stderr, rtol=1e-12)
+    np.testing.assert_allclose(acc.apply(ACC), pl.apply(fa.params, jnp.asarray(ACC)), rtol=1e-12)
+    # the after-RMS is that of the Fit (|a| / g - 1, unit g)
+    assert acc.rms_after == pytest.approx(float(fa.rms), rel=1e-9)
+    assert mag.rms_after_pct == pytest.approx(100 * float(fm.rms), rel=1e-9)
+    ref = cj.calibrate_mag(MAG, model="full", field=1.0)
+    np.testing.assert_allclose(mag.stderr_soft_iron, ref.stderr_soft_iron, rtol=1e-6)
+    np.testing.assert_allclose(mag.stderr_center, ref.stderr_center, rtol=1e-6)
+    np.testing.assert_allclose(mag.semi_axes, ref.semi_axes, rtol=1e-6)

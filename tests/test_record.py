@@ -207,6 +207,8 @@ def test_nothing_recorded_is_an_error_and_the_old_file_is_left(tmp_path, capsys)
     assert out.read_bytes() == before and not out.with_suffix(".calib.json").exists()
 
 
+# a SimpleNamespace stands in for the SerialReader
+@pytest.mark.wrong_types
 def test_one_dead_board_does_not_cost_the_other_its_calibration(tmp_path, capsys, monkeypatch):
     """Two ports, one of which sent nothing: the live board's complete log is calibrated and its
     JSON written, the dead one is named on stderr, and the exit code says not everything

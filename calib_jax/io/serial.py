@@ -195,7 +195,7 @@ def log_columns(layout: Sequence[str | None]) -> list[str]:
     return [c for c in _CANON if c in have]
 
 
-def format_row(values: Sequence[float]) -> str:
+def format_row(values: Sequence[float] | np.ndarray) -> str:
     """One log line (without its newline): shortest round-trip repr of each value."""
     return ",".join(repr(float(v)) for v in values)
 

@@ -36,12 +36,12 @@ class AccelParams(eqx.Module):
     """beta_x, beta_y, beta_z: input units (the reading at zero acceleration)."""
 
     @classmethod
-    def from_vector(cls, p: Float[Array, "9"]) -> AccelParams:
+    def from_vector(cls, p: Float[Array, "*batch 9"]) -> AccelParams:
         """Build from paper 1's parameter vector p."""
         p = jnp.asarray(p)
         return cls(gains=p[0:3], nonorth=p[3:6], bias=p[6:9])
 
-    def to_vector(self) -> Float[Array, "9"]:
+    def to_vector(self) -> Float[Array, "*batch 9"]:
         """Paper 1's parameter vector p."""
         return jnp.concatenate([self.gains, self.nonorth, self.bias], axis=-1)
 
