@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -102,30 +103,31 @@ def offset_reference(q_ref: jax.Array, offset: jax.Array) -> jax.Array:
     return jax.vmap(lambda q: quat_multiply(qh, quat_multiply(q, qb)))(q_ref)
 
 
-def _split(theta, fitted, defaults):
-    """theta -> {block: value}, fitted blocks from theta, the others from ``defaults``."""
-    out, k = {}, 0
-    for name, n in BLOCKS:
-        if name in fitted:
-            out[name] = theta[k : k + n]
-            k += n
-        else:
-            out[name] = defaults[name]
-    return out
+N_THETA = sum(n for _, n in BLOCKS)
 
 
-def _residual(theta, args, fitted):
-    base, defaults, acc, mag, q_ref, w = args
-    b = _split(theta, fitted, defaults)
-    p = unpack(b["calibration"], base)
-    q = attitude(p, acc, mag, b["dip"][0])
-    e = rotation_residual(q, offset_reference(q_ref, b["offset"])) * jnp.sqrt(w)[:, None]
-    rows = [e.ravel()]
-    if "calibration" in fitted:
-        # the estimator normalises m: hold the scale of W by the mean calibrated |m| = 1
-        norm = jnp.sum(w * jnp.linalg.norm(p.mag.apply(mag), axis=1)) / jnp.sum(w)
-        rows.append((norm - 1.0)[None] * jnp.sqrt(jnp.sum(w)))
-    return jnp.concatenate(rows)
+def free_mask(fitted: tuple[str, ...]) -> np.ndarray:
+    """(N_THETA,) bool: the entries of the blocks in ``fitted``."""
+    return np.concatenate([np.full(n, name in fitted) for name, n in BLOCKS])
+
+
+def _residual(theta, args):
+    """Attitude residuals (3 per sample, weighted), the scale row of W, and one pinning row per
+    parameter: theta - default where the parameter is held (``free`` False), else 0. The
+    parameters are always all N_THETA (one compiled fit whatever is held); a held one
+    has a Jacobian column of its pinning row only and a zero residual there, so the LM step
+    leaves it at its default exactly and the free ones see the problem without it."""
+    base, default, free, acc, mag, q_ref, w = args
+    t = jnp.where(free, theta, default)
+    p = unpack(t[:12], base)
+    q = attitude(p, acc, mag, t[12])
+    e = rotation_residual(q, offset_reference(q_ref, t[13:17])) * jnp.sqrt(w)[:, None]
+    # the estimator normalises m: hold the scale of W by the mean calibrated |m| = 1 (a row
+    # that is zero while the calibration is held)
+    norm = jnp.sum(w * jnp.linalg.norm(p.mag.apply(mag), axis=1)) / jnp.sum(w)
+    scale_row = jnp.where(free[0], (norm - 1.0) * jnp.sqrt(jnp.sum(w)), 0.0)
+    pin = jnp.where(free, 0.0, theta - default)
+    return jnp.concatenate([e.ravel(), scale_row[None], pin])
 
 
 @dataclass(frozen=True)
@@ -226,31 +228,48 @@ def end_to_end(
     )
     if not fitted:
         raise ValueError("nothing to fit: set fit_calibration, fit_dip or fit_offset")
-    packed = pack(start.params, start.dip_deg)
-    defaults = {"calibration": packed[:12], "dip": packed[12:], "offset": jnp.zeros(4)}
-    theta0 = jnp.concatenate([defaults[name] for name in fitted])
+    default = jnp.concatenate([pack(start.params, start.dip_deg), jnp.zeros(4)])
+    free = free_mask(fitted)
     args = (
         start.params,
-        defaults,
+        default,
+        jnp.asarray(free),
         jnp.asarray(acc),
         jnp.asarray(mag),
         jnp.asarray(q_ref),
         jnp.asarray(w),
     )
-    res = _run(theta0, args, max_iter, fitted)
-    b = _split(res.params, fitted, defaults)
+    # degrees of freedom: three per sample with a reference, plus the scale row, less the
+    # free parameters (the pinning rows and padded samples add none)
+    dof = 3 * int(ok.sum()) + int(fit_calibration) - int(free.sum())
+    full = _run(default, args, max_iter, float(dof))
+    res = _restrict(full, free)
+    t = np.asarray(full.params)
     return EndToEnd(
-        unpack(b["calibration"], start.params),
-        float(b["dip"][0]),
-        np.asarray(b["offset"]),
+        unpack(jnp.asarray(t[:12]), start.params),
+        float(t[12]),
+        t[13:17],
         res,
         fitted,
     )
 
 
-@functools.partial(jax.jit, static_argnames=("max_iter", "fitted"))
-def _run(theta0, args, max_iter, fitted):
-    return lm_solve(functools.partial(_residual, fitted=fitted), theta0, args, max_iter=max_iter)
+@functools.partial(jax.jit, static_argnames=("max_iter",))
+def _run(theta0, args, max_iter, dof):
+    return lm_solve(_residual, theta0, args, max_iter=max_iter, dof=dof)
+
+
+def _restrict(res: LMResult, free: np.ndarray) -> LMResult:
+    """The LM result over the free parameters only (the held ones have pinning rows, not
+    data: their standard errors mean nothing)."""
+    idx = np.flatnonzero(free)
+    sub = (
+        res.params[idx],
+        res.covariance[np.ix_(idx, idx)],
+        res.stderr[idx],
+        res.correlation[np.ix_(idx, idx)],
+    )
+    return eqx.tree_at(lambda r: (r.params, r.covariance, r.stderr, r.correlation), res, sub)
 
 
 # ---------------------------------------------------------------------------------------------
