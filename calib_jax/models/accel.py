@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from ..linalg import inv3
 from .layout import ALPHA_INDEX, PARAM_NAMES  # noqa: F401  (re-exported)
@@ -60,7 +60,7 @@ class AccelParams(eqx.Module):
         return cls(gains=jnp.ones(3, dtype), nonorth=jnp.zeros(3, dtype), bias=jnp.zeros(3, dtype))
 
 
-def alpha_matrix(p: Float[Array, "9"]) -> Float[Array, "3 3"]:
+def alpha_matrix(p: Float[ArrayLike, "9"]) -> Float[Array, "3 3"]:
     """alpha from the parameter vector (symmetric, paper 1 eq. 1)."""
     return jnp.asarray(p)[ALPHA_INDEX]
 
