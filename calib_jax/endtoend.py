@@ -170,10 +170,9 @@ def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
 
 
 def _rotvec(R: np.ndarray) -> np.ndarray:
-    q = np.asarray(dcm_to_quat(jnp.asarray(R)))
-    ang = 2.0 * np.arctan2(np.linalg.norm(q[1:]), q[0])
-    n = np.linalg.norm(q[1:])
-    return np.zeros(3) if n == 0 else q[1:] / n * ang
+    from scipy.spatial.transform import Rotation as _R
+
+    return _R.from_matrix(R).as_rotvec()
 
 
 @dataclass(frozen=True)

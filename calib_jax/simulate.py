@@ -190,8 +190,9 @@ def random_rotation(rng: np.random.Generator | int = 0, max_angle_deg: float = 1
     rng = np.random.default_rng(rng)
     axis = random_directions(1, rng)[0]
     ang = np.deg2rad(rng.uniform(0.0, max_angle_deg))
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * (K @ K)
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(ang * axis).as_matrix()
 
 
 def random_ellipsoid(
@@ -212,15 +213,13 @@ def random_ellipsoid(
 
 
 def _quat_to_dcm_np(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    """[w, x, y, z] quaternions (..., 4) -> direction cosine matrices (..., 3, 3), by SciPy."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, float)
+    flat = q.reshape(-1, 4)
+    C = Rotation.from_quat(np.concatenate([flat[:, 1:], flat[:, :1]], axis=1)).as_matrix()
+    return C.reshape(q.shape[:-1] + (3, 3))
 
 
 def _dcm_to_quat_np(C: np.ndarray) -> np.ndarray:
