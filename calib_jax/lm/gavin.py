@@ -227,7 +227,6 @@ def lm_solve(
             f"{m} residuals cannot determine {n} parameters; give more samples than parameters"
         )
     w = jnp.ones(m, dtype) if weights is None else jnp.asarray(weights, dtype)
-    max_nfev_ = 10**9 if max_nfev is None else int(max_nfev)
     # Degrees of freedom count only samples with non-zero weight (padding is weight 0); a
     # caller whose residual vector is a compressed stand-in for the samples (the moment form
     # in calib_jax.batch) passes the samples' dof instead.
@@ -235,189 +234,302 @@ def lm_solve(
         dof = jnp.maximum(jnp.sum(w > 0) - n, 1).astype(dtype)
     else:
         dof = jnp.maximum(jnp.asarray(dof, dtype), 1.0)
-    n_fd = 2 * n if fd_scheme == "central" else n
+    P = _Problem(
+        fun=fun,
+        args=args,
+        w=w,
+        dof=dof,
+        n=n,
+        dtype=dtype,
+        update_type=update_type,
+        rho_form=rho_form,
+        jacobian=jacobian,
+        fd_scheme=fd_scheme,
+        fd_delta=fd_delta,
+        eps1=eps1,
+        eps2=eps2,
+        eps3=eps3,
+        eps4=eps4,
+        lambda0=lambda0,
+        lambda_up=lambda_up,
+        lambda_down=lambda_down,
+        lambda_min=lambda_min,
+        lambda_max=lambda_max,
+        max_iter=max_iter,
+        max_nfev=10**9 if max_nfev is None else int(max_nfev),
+        hist_len=max_iter if history else 1,
+        history=history,
+    )
+    final = jax.lax.while_loop(
+        lambda c: c.status == _RUNNING, lambda c: _iteration(P, c), _init(P, p0, e0)
+    )
+    return _finish(P, final, absolute_sigma, covariance_method)
 
-    def jac_exact(p):
-        return jax.jacfwd(fun)(p, args)
 
-    def jac_fd(p):
-        return finite_difference_jacobian(fun, p, args, fd_delta, fd_scheme)
+# ---------------------------------------------------------------------------------------------
+# the parts of lm_solve, in the order one iteration uses them
 
-    def normal(J, e):
-        jw = J * w[:, None]
+
+class _Problem(NamedTuple):
+    """What does not change during a solve: the residual, its data and weights, the options."""
+
+    fun: Callable
+    args: Any
+    w: jax.Array
+    dof: jax.Array
+    n: int
+    dtype: Any
+    update_type: int
+    rho_form: str
+    jacobian: str
+    fd_scheme: str
+    fd_delta: float
+    eps1: float
+    eps2: float
+    eps3: float
+    eps4: float
+    lambda0: float
+    lambda_up: float
+    lambda_down: float
+    lambda_min: float
+    lambda_max: float
+    max_iter: int
+    max_nfev: int
+    hist_len: int
+    history: bool
+
+    @property
+    def n_fd(self) -> int:
+        """Residual evaluations of one finite-difference Jacobian."""
+        return 2 * self.n if self.fd_scheme == "central" else self.n
+
+    def residual(self, p):
+        return self.fun(p, self.args)
+
+    def jac_exact(self, p):
+        return jax.jacfwd(self.fun)(p, self.args)
+
+    def jac_fd(self, p):
+        return finite_difference_jacobian(self.fun, p, self.args, self.fd_delta, self.fd_scheme)
+
+    def normal(self, J, e):
+        """J'WJ and the descent direction -J'We."""
+        jw = J * self.w[:, None]
         return jw.T @ J, -(jw.T @ e)
 
-    def chi2_of(e):
-        return jnp.sum(w * e * e)
+    def chi2(self, e):
+        return jnp.sum(self.w * e * e)
 
-    if jacobian == "exact":
-        J0 = jac_exact(p0)
-        nfev0 = 1
+
+def _init(P: _Problem, p0: jax.Array, e0: jax.Array) -> _Carry:
+    """The state before the first iteration: Jacobian at the start, lambda_0 (scaled by the
+    largest diagonal of J'WJ for types 2 and 3), NONFINITE at once for a non-finite start."""
+    if P.jacobian == "exact":
+        J0, nfev0 = P.jac_exact(p0), 1
     else:
-        J0 = jac_fd(p0)
-        nfev0 = 1 + n_fd
-    jtwj0, g0 = normal(J0, e0)
-    chi2_0 = chi2_of(e0)
-    lam0 = lambda0 if update_type == 1 else lambda0 * jnp.max(jnp.diag(jtwj0))
+        J0, nfev0 = P.jac_fd(p0), 1 + P.n_fd
+    jtwj0, g0 = P.normal(J0, e0)
+    chi2_0 = P.chi2(e0)
+    lam0 = P.lambda0 if P.update_type == 1 else P.lambda0 * jnp.max(jnp.diag(jtwj0))
     finite0 = jnp.isfinite(chi2_0) & jnp.all(jnp.isfinite(J0))
-    hist_len = max_iter if history else 1
-    init = _Carry(
+    return _Carry(
         p=p0,
         e=e0,
         chi2=chi2_0,
         J=J0,
         jtwj=jtwj0,
         g=g0,
-        lam=jnp.asarray(lam0, dtype),
-        nu=jnp.asarray(2.0, dtype),
+        lam=jnp.asarray(lam0, P.dtype),
+        nu=jnp.asarray(2.0, P.dtype),
         it=jnp.asarray(0),
         nfev=jnp.asarray(nfev0),
         njev=jnp.asarray(1),
         n_acc=jnp.asarray(0),
         fresh=jnp.asarray(True),
         status=jnp.where(finite0, _RUNNING, int(Status.NONFINITE)),
-        hist_chi2=jnp.full(hist_len, jnp.nan, dtype),
-        hist_lam=jnp.full(hist_len, jnp.nan, dtype),
-        hist_acc=jnp.zeros(hist_len, bool),
+        hist_chi2=jnp.full(P.hist_len, jnp.nan, P.dtype),
+        hist_lam=jnp.full(P.hist_len, jnp.nan, P.dtype),
+        hist_acc=jnp.zeros(P.hist_len, bool),
     )
-    eye = jnp.eye(n, dtype=dtype)
 
-    def body(c: _Carry) -> _Carry:
-        dj = jnp.diag(c.jtwj)
-        D = dj if update_type == 1 else jnp.ones_like(dj)
-        A = c.jtwj + c.lam * D * eye
-        h = cho_solve_small(A, c.g)
-        h_ok = jnp.all(jnp.isfinite(h))
-        h = jnp.where(h_ok, h, 0.0)
+
+class _Trial(NamedTuple):
+    h: jax.Array
+    h_ok: jax.Array
+    p: jax.Array
+    e: jax.Array
+    chi2: jax.Array
+    nfev: jax.Array
+    alpha: jax.Array
+    pred: jax.Array
+    """The predicted decrease of chi2 (the acceptance ratio's denominator)."""
+
+
+def _trial_step(P: _Problem, c: _Carry) -> _Trial:
+    """Solve (J'WJ + lambda D) h = J'W e (D = diag(J'WJ) for type 1, I otherwise), evaluate
+    p + h; type 2 then scales h by the quadratic line search's alpha and evaluates again."""
+    dj = jnp.diag(c.jtwj)
+    D = dj if P.update_type == 1 else jnp.ones_like(dj)
+    A = c.jtwj + c.lam * D * jnp.eye(P.n, dtype=P.dtype)
+    h = cho_solve_small(A, c.g)
+    h_ok = jnp.all(jnp.isfinite(h))
+    h = jnp.where(h_ok, h, 0.0)
+    p_try = c.p + h
+    e_try = P.residual(p_try)
+    chi2_try = P.chi2(e_try)
+    nfev = c.nfev + 1
+    alpha = jnp.asarray(1.0, P.dtype)
+    if P.update_type == 2:
+        gh = c.g @ h
+        alpha = _safe_div(gh, (chi2_try - c.chi2) / 2.0 + 2.0 * gh, 1.0)
+        h = alpha * h
         p_try = c.p + h
-        e_try = fun(p_try, args)
-        chi2_try = chi2_of(e_try)
-        nfev = c.nfev + 1
-        alpha = jnp.asarray(1.0, dtype)
-        if update_type == 2:
-            gh = c.g @ h
-            alpha = _safe_div(gh, (chi2_try - c.chi2) / 2.0 + 2.0 * gh, 1.0)
-            h = alpha * h
-            p_try = c.p + h
-            e_try = fun(p_try, args)
-            chi2_try = chi2_of(e_try)
-            nfev = nfev + 1
-        if rho_form == "paper":
-            pred = 2.0 * jnp.abs(h @ (c.lam * h + c.g))
-        else:
-            pred = jnp.abs(h @ (c.lam * D * h + c.g))
-        rho = _safe_div(c.chi2 - chi2_try, pred, -jnp.inf)
-        accept = h_ok & jnp.isfinite(chi2_try) & (rho > eps4)
+        e_try = P.residual(p_try)
+        chi2_try = P.chi2(e_try)
+        nfev = nfev + 1
+    if P.rho_form == "paper":
+        pred = 2.0 * jnp.abs(h @ (c.lam * h + c.g))
+    else:
+        pred = jnp.abs(h @ (c.lam * D * h + c.g))
+    return _Trial(h, h_ok, p_try, e_try, chi2_try, nfev, alpha, pred)
 
-        # lambda update (LM_SPEC table), kept within [lambda_min, lambda_max]
-        if update_type == 1:
-            lam_acc = c.lam / lambda_down
-            lam_rej = c.lam * lambda_up
-            nu = c.nu
-        elif update_type == 2:
-            lam_acc = c.lam / (1.0 + alpha)
-            lam_rej = c.lam + _safe_div(jnp.abs(chi2_try - c.chi2), 2.0 * alpha, jnp.inf)
-            lam_rej = jnp.where(
-                jnp.isfinite(lam_rej) & (lam_rej > c.lam), lam_rej, c.lam * lambda_up
-            )
-            nu = c.nu
-        else:
-            lam_acc = c.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            lam_rej = c.lam * c.nu
-            nu = jnp.where(accept, 2.0, c.nu * 2.0)
-        lam = jnp.where(accept, lam_acc, lam_rej)
-        lam = jnp.clip(lam, lambda_min, lambda_max)
 
-        p = jnp.where(accept, p_try, c.p)
-        e = jnp.where(accept, e_try, c.e)
-        chi2 = jnp.where(accept, chi2_try, c.chi2)
-        n_acc = c.n_acc + accept.astype(c.n_acc.dtype)
-        it = c.it + 1
-        started = n_acc > 0
-        # round-off of chi2 = sum w e^2: the sum's own (sqrt(m) eps chi2) plus each residual's.
-        # A residual is a difference of terms of size s_i ~ |e_i| + sum_j |J_ij p_j|, so it
-        # carries ~eps s_i of absolute error, and chi2 ~2 eps sum w_i |e_i| s_i; at a noise-floor
-        # minimum (|e_i| << s_i) that term dominates (see "Decisions").
-        s = jnp.abs(c.e) + jnp.abs(c.J) @ jnp.abs(c.p)
-        tiny_chi2 = (
-            4.0
-            * jnp.finfo(dtype).eps
-            * (jnp.sqrt(dof + n) * c.chi2 + 2.0 * jnp.sum(w * jnp.abs(c.e) * s))
-        )
-        small_step = started & (jnp.max(jnp.abs(h) / (jnp.abs(p) + 1e-12)) < eps2)
-        # not gated on an accepted step: a start already at the optimum (the algebraic
-        # ellipsoid start often is, to round-off) would otherwise reject until the budget
-        roundoff = ~accept & h_ok & (jnp.abs(c.chi2 - chi2_try) <= tiny_chi2) & (pred <= tiny_chi2)
-        if jacobian == "exact":
-            J = jax.lax.cond(accept, lambda: jac_exact(p_try), lambda: c.J)
-            njev = c.njev + accept.astype(c.njev.dtype)
-            fresh = jnp.asarray(True)
-        else:
-            hh = h @ h
-            upd = jnp.outer(e_try - c.e - c.J @ h, h) / jnp.where(hh > 0, hh, 1.0)
-            J_b = jnp.where((hh > 0) & jnp.all(jnp.isfinite(upd)), c.J + upd, c.J)
-            # A step computed from a Broyden Jacobian can look converged at a point where only
-            # the approximate gradient vanishes: refresh by finite differences and go on.
-            stale_stop = (small_step | roundoff) & ~c.fresh
-            refresh = ((c.it + 1) % (2 * n) == 0) | ~accept | stale_stop
-            J = jax.lax.cond(refresh, lambda: jac_fd(p), lambda: J_b)
-            nfev = nfev + jnp.where(refresh, n_fd, 0)
-            njev = c.njev + refresh.astype(c.njev.dtype)
-            fresh = refresh
-        jtwj, g = normal(J, e)
+# The three lambda updates of LM_SPEC's table: (carry, trial, accepted?, rho, problem) ->
+# (lambda after an accepted step, lambda after a rejected one, nu)
 
-        conv_g = started & fresh & (jnp.max(jnp.abs(g)) < eps1)
-        conv_p = small_step & c.fresh
-        conv_c = started & (chi2 / dof < eps3)
-        conv_r = roundoff & c.fresh
-        singular = ~h_ok & (c.lam >= lambda_max)
-        out_of_budget = (it >= max_iter) | (nfev >= max_nfev_)
-        status = jnp.select(
-            [conv_g, conv_p, conv_c, conv_r, singular, out_of_budget],
-            [
-                int(Status.CONVERGED_GRADIENT),
-                int(Status.CONVERGED_PARAMETERS),
-                int(Status.CONVERGED_CHI2),
-                int(Status.CONVERGED_ROUNDOFF),
-                int(Status.SINGULAR),
-                int(Status.MAX_ITERATIONS),
-            ],
-            _RUNNING,
-        )
-        idx = jnp.minimum(c.it, hist_len - 1)
-        return _Carry(
-            p=p,
-            e=e,
-            chi2=chi2,
-            J=J,
-            jtwj=jtwj,
-            g=g,
-            lam=lam,
-            nu=nu,
-            it=it,
-            nfev=nfev,
-            njev=njev,
-            n_acc=n_acc,
-            fresh=fresh,
-            status=status,
-            hist_chi2=c.hist_chi2.at[idx].set(chi2) if history else c.hist_chi2,
-            hist_lam=c.hist_lam.at[idx].set(c.lam) if history else c.hist_lam,
-            hist_acc=c.hist_acc.at[idx].set(accept) if history else c.hist_acc,
-        )
 
-    final = jax.lax.while_loop(lambda c: c.status == _RUNNING, body, init)
+def _lambda_marquardt(c, t, accept, rho, P):
+    return c.lam / P.lambda_down, c.lam * P.lambda_up, c.nu
+
+
+def _lambda_quadratic(c, t, accept, rho, P):
+    lam_rej = c.lam + _safe_div(jnp.abs(t.chi2 - c.chi2), 2.0 * t.alpha, jnp.inf)
+    lam_rej = jnp.where(jnp.isfinite(lam_rej) & (lam_rej > c.lam), lam_rej, c.lam * P.lambda_up)
+    return c.lam / (1.0 + t.alpha), lam_rej, c.nu
+
+
+def _lambda_nielsen(c, t, accept, rho, P):
+    lam_acc = c.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+    return lam_acc, c.lam * c.nu, jnp.where(accept, 2.0, c.nu * 2.0)
+
+
+LAMBDA_UPDATES = {1: _lambda_marquardt, 2: _lambda_quadratic, 3: _lambda_nielsen}
+
+
+def _roundoff_bound(P: _Problem, c: _Carry) -> jax.Array:
+    """The round-off of chi2 = sum w e^2 at the current point: the sum's own (sqrt(m) eps chi2)
+    plus each residual's. A residual is a difference of terms of size s_i ~ |e_i| +
+    sum_j |J_ij p_j|, so it carries ~eps s_i of absolute error, and chi2 ~2 eps sum w_i |e_i|
+    s_i; at a noise-floor minimum (|e_i| << s_i) that term dominates (see "Decisions")."""
+    s = jnp.abs(c.e) + jnp.abs(c.J) @ jnp.abs(c.p)
+    return (
+        4.0
+        * jnp.finfo(P.dtype).eps
+        * (jnp.sqrt(P.dof + P.n) * c.chi2 + 2.0 * jnp.sum(P.w * jnp.abs(c.e) * s))
+    )
+
+
+def _refresh_jacobian(P: _Problem, c: _Carry, t: _Trial, accept, p, nfev, stale):
+    """The Jacobian for the next iteration -> (J, nfev, njev, fresh). Exact: autodiff at an
+    accepted point. Broyden: a rank-1 update, replaced by finite differences every 2n
+    iterations, after a rejected step, and when a stop is about to be judged on a Broyden
+    Jacobian (``stale``: a step computed from it can look converged where only the
+    approximate gradient vanishes)."""
+    if P.jacobian == "exact":
+        J = jax.lax.cond(accept, lambda: P.jac_exact(t.p), lambda: c.J)
+        return J, nfev, c.njev + accept.astype(c.njev.dtype), jnp.asarray(True)
+    hh = t.h @ t.h
+    upd = jnp.outer(t.e - c.e - c.J @ t.h, t.h) / jnp.where(hh > 0, hh, 1.0)
+    J_b = jnp.where((hh > 0) & jnp.all(jnp.isfinite(upd)), c.J + upd, c.J)
+    refresh = ((c.it + 1) % (2 * P.n) == 0) | ~accept | stale
+    J = jax.lax.cond(refresh, lambda: P.jac_fd(p), lambda: J_b)
+    nfev = nfev + jnp.where(refresh, P.n_fd, 0)
+    return J, nfev, c.njev + refresh.astype(c.njev.dtype), refresh
+
+
+def _status(conv_g, conv_p, conv_c, conv_r, singular, out_of_budget) -> jax.Array:
+    """The first condition that holds, in this order, else still running."""
+    return jnp.select(
+        [conv_g, conv_p, conv_c, conv_r, singular, out_of_budget],
+        [
+            int(Status.CONVERGED_GRADIENT),
+            int(Status.CONVERGED_PARAMETERS),
+            int(Status.CONVERGED_CHI2),
+            int(Status.CONVERGED_ROUNDOFF),
+            int(Status.SINGULAR),
+            int(Status.MAX_ITERATIONS),
+        ],
+        _RUNNING,
+    )
+
+
+def _iteration(P: _Problem, c: _Carry) -> _Carry:
+    """One LM iteration: trial step, acceptance, lambda update, stopping tests."""
+    t = _trial_step(P, c)
+    rho = _safe_div(c.chi2 - t.chi2, t.pred, -jnp.inf)
+    accept = t.h_ok & jnp.isfinite(t.chi2) & (rho > P.eps4)
+    lam_acc, lam_rej, nu = LAMBDA_UPDATES[P.update_type](c, t, accept, rho, P)
+    lam = jnp.clip(jnp.where(accept, lam_acc, lam_rej), P.lambda_min, P.lambda_max)
+
+    p = jnp.where(accept, t.p, c.p)
+    e = jnp.where(accept, t.e, c.e)
+    chi2 = jnp.where(accept, t.chi2, c.chi2)
+    n_acc = c.n_acc + accept.astype(c.n_acc.dtype)
+    it = c.it + 1
+    started = n_acc > 0
+    tiny_chi2 = _roundoff_bound(P, c)
+    small_step = started & (jnp.max(jnp.abs(t.h) / (jnp.abs(p) + 1e-12)) < P.eps2)
+    # not gated on an accepted step: a start already at the optimum (the algebraic
+    # ellipsoid start often is, to round-off) would otherwise reject until the budget
+    roundoff = ~accept & t.h_ok & (jnp.abs(c.chi2 - t.chi2) <= tiny_chi2) & (t.pred <= tiny_chi2)
+    stale = (small_step | roundoff) & ~c.fresh
+    J, nfev, njev, fresh = _refresh_jacobian(P, c, t, accept, p, t.nfev, stale)
+    jtwj, g = P.normal(J, e)
+
+    status = _status(
+        conv_g=started & fresh & (jnp.max(jnp.abs(g)) < P.eps1),
+        conv_p=small_step & c.fresh,
+        conv_c=started & (chi2 / P.dof < P.eps3),
+        conv_r=roundoff & c.fresh,
+        singular=~t.h_ok & (c.lam >= P.lambda_max),
+        out_of_budget=(it >= P.max_iter) | (nfev >= P.max_nfev),
+    )
+    idx = jnp.minimum(c.it, P.hist_len - 1)
+    return _Carry(
+        p=p,
+        e=e,
+        chi2=chi2,
+        J=J,
+        jtwj=jtwj,
+        g=g,
+        lam=lam,
+        nu=nu,
+        it=it,
+        nfev=nfev,
+        njev=njev,
+        n_acc=n_acc,
+        fresh=fresh,
+        status=status,
+        hist_chi2=c.hist_chi2.at[idx].set(chi2) if P.history else c.hist_chi2,
+        hist_lam=c.hist_lam.at[idx].set(c.lam) if P.history else c.hist_lam,
+        hist_acc=c.hist_acc.at[idx].set(accept) if P.history else c.hist_acc,
+    )
+
+
+def _finish(P: _Problem, final: _Carry, absolute_sigma: bool, covariance_method: str):
+    """The LMResult: reduced chi2, covariance from J'WJ at the solution (a finite-difference
+    Jacobian for Broyden: the uncertainty needs a real one), the history if kept."""
     jtwj = final.jtwj
     nfev = final.nfev
-    if jacobian == "broyden":
-        # Uncertainty needs a real Jacobian, not the Broyden approximation.
-        jtwj, _ = normal(jac_fd(final.p), final.e)
-        nfev = nfev + n_fd
-    reduced = final.chi2 / dof
+    if P.jacobian == "broyden":
+        jtwj, _ = P.normal(P.jac_fd(final.p), final.e)
+        nfev = nfev + P.n_fd
+    reduced = final.chi2 / P.dof
     unc = uncertainty if covariance_method == "eigh" else uncertainty_cholesky
     cov, stderr, corr, cond = unc(jtwj, reduced, absolute_sigma)
     hist = (
         LMHistory(chi2=final.hist_chi2, lam=final.hist_lam, accepted=final.hist_acc)
-        if history
+        if P.history
         else None
     )
     return LMResult(
