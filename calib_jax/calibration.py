@@ -215,6 +215,7 @@ class AccelCalibration:
         p, s = self.params, self.stderr
         d = {
             "format_version": self.format_version,
+            "kind": "accel",
             "model": self.model,
             "sensor_id": self.sensor_id,
             "date": self.date,
@@ -261,6 +262,11 @@ class AccelCalibration:
         gain, a singular gain matrix, a non-positive g)."""
         r = _Doc(d, source)
         _check_version(r.d, r.where)
+        if r.d.get("kind", "accel") != "accel":  # files before 'kind' was written have none
+            raise ValueError(
+                f"{r.where}not an accelerometer calibration: kind is {r.d.get('kind')!r} (load "
+                "any calibration with calib_jax.export.read)"
+            )
         if r.d.get("model") not in MODELS:
             raise ValueError(
                 f"{r.where}not an accelerometer calibration: model is {r.d.get('model')!r}"

@@ -188,6 +188,29 @@ def test_xsens_is_at_the_floor_with_nine_parameters():
     assert np.abs(z).max() < 1e-2, z
 
 
+def test_diagnosis_record_round_trips(tmp_path):
+    """Issue 14: a diagnosis is a record like the calibrations: kind, format_version, save,
+    load, ==; a calibration loader refuses it by its kind, and it refuses a calibration."""
+    from calib_jax import AccelCalibration
+    from calib_jax.diagnose import Diagnosis
+
+    log = load_log(demo_log_path(), columns="t,ax,ay,az")
+    d = diagnose_accel(log)
+    path = tmp_path / "diagnosis.json"
+    d.save(path)
+    back = Diagnosis.load(path)
+    assert back == d and back.to_dict()["kind"] == "diagnosis"
+    assert back.verdict == d.verdict and back.rms_after == d.rms_after
+    with pytest.raises(ValueError, match="kind is 'diagnosis'"):
+        AccelCalibration.load(path)
+    from calib_jax import calibrate_accel
+
+    cal = tmp_path / "cal.json"
+    calibrate_accel(log).save(cal)
+    with pytest.raises(ValueError, match="not a diagnosis"):
+        Diagnosis.load(cal)
+
+
 def test_ckexplorer_scale_asymmetry(tmp_path):
     """CK-Explorer tumble, 160 poses of 100 samples. The issue's analysis: a +g/-g asymmetry of
     about +4 mg on y and -3 mg on z, residual about 1.04 -> 0.75 mg. Found here: the same sizes

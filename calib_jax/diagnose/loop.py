@@ -285,6 +285,15 @@ def _norm(theta, free, x, tau, T):
 # --------------------------------------------------------------------------- result
 
 
+DIAGNOSIS_FORMAT_VERSION = 1
+_JSON_FIELDS = (
+    "sensor verdict steps effects rms_before rms_after noise_floor noise_floor_white "
+    "noise_floor_allan unexplained_structure structure notes rejected rounds groups "
+    "n_observations observations units source"
+).split()
+_FLOAT_FIELDS = "rms_before rms_after noise_floor noise_floor_white noise_floor_allan".split()
+
+
 @dataclass
 class Diagnosis:
     """The loop's outcome; :meth:`to_dict` is the ``calib-jax diagnose --json`` content."""
@@ -319,12 +328,61 @@ class Diagnosis:
     e_final: np.ndarray | None = None
 
     def to_dict(self) -> dict:
-        keys = (
-            "sensor verdict steps effects rms_before rms_after noise_floor noise_floor_white "
-            "noise_floor_allan unexplained_structure structure notes rejected rounds groups "
-            "n_observations observations units source"
-        ).split()
-        return _jsonable({k: getattr(self, k) for k in keys})
+        """The JSON record: ``kind`` "diagnosis", ``format_version``, then every field but the
+        arrays kept for the report (non-finite numbers as null)."""
+        head = {"kind": "diagnosis", "format_version": DIAGNOSIS_FORMAT_VERSION}
+        return head | _jsonable({k: getattr(self, k) for k in _JSON_FIELDS})
+
+    def save(self, path) -> None:
+        """Write :meth:`to_dict` as JSON (atomically: a crash leaves the old file)."""
+        from ..calibration import write_json_atomic
+
+        write_json_atomic(path, self.to_dict())
+
+    @classmethod
+    def from_dict(cls, d: object, source=None) -> Diagnosis:
+        """Rebuild from :meth:`to_dict`'s layout (without the report's arrays); a ValueError
+        names what is wrong. Files from before ``kind`` was written (no kind, no version) are
+        read as version 1."""
+        where = f"{source}: " if source else ""
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}a diagnosis file holds a JSON object, got {type(d).__name__}")
+        if d.get("kind", "diagnosis") != "diagnosis":
+            raise ValueError(
+                f"{where}not a diagnosis (kind {d.get('kind')!r}); calibrations load with "
+                "calib_jax.export.read"
+            )
+        version = d.get("format_version", 1)
+        if version != DIAGNOSIS_FORMAT_VERSION:
+            raise ValueError(
+                f"{where}diagnosis format_version {version!r} is not supported (this calib_jax "
+                f"reads version {DIAGNOSIS_FORMAT_VERSION})"
+            )
+        missing = [k for k in _JSON_FIELDS if k not in d and k != "source"]
+        if missing:
+            raise ValueError(f"{where}not a diagnosis: missing {', '.join(missing)}")
+        kw = {k: d.get(k) for k in _JSON_FIELDS}
+        for k in (
+            "rms_before",
+            "rms_after",
+            "noise_floor",
+            "noise_floor_white",
+            "noise_floor_allan",
+        ):
+            kw[k] = float("nan") if kw[k] is None else float(kw[k])
+        return cls(**kw)
+
+    @classmethod
+    def load(cls, path) -> Diagnosis:
+        from ..calibration import _read_json
+
+        return cls.from_dict(_read_json(path), source=path)
+
+    def __eq__(self, other) -> bool:
+        """Equal records: the same JSON (the report's arrays are not compared)."""
+        return isinstance(other, Diagnosis) and self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
 
     def _repr_html_(self) -> str:
         from ..display import diagnosis_html
