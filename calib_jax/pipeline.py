@@ -34,7 +34,7 @@ Not converged: a :class:`Fit` carries the solver ``status`` (``Fit.converged`` i
 The implicit derivative is that of the optimum near the returned point; where the fit did not
 converge it does not describe the returned parameters (see :mod:`calib_jax.implicit`).
 
-float32: supported with a documented accuracy (README "In a JAX pipeline"): the fits work on
+float32: supported with a documented accuracy (docs/pipeline.md): the fits work on
 data normalised to unit scale and stop at float32 round-off; tested within 3 % of a standard
 error of the float64 parameters, 3e-4 of the derivatives' scale and 5e-3 deg of attitude
 (``benchmarks/float32_accuracy.py`` measures the spread over many boards). float64 is the

@@ -426,7 +426,7 @@ def test_float32_runs_with_documented_accuracy(fits):
     largest difference over them in brackets; this test's board lands closer):
     parameters within 3 % of their standard error (1 %, 8.4e-6 absolute), the implicit
     derivative within 3e-4 of its scale (5.2e-5), roll/pitch/yaw within 5e-3 deg (1.8e-3).
-    The README quotes these bounds."""
+    docs/pipeline.md quotes these bounds."""
     fa, fm = fits
     a32, m32 = jnp.asarray(ACC, jnp.float32), jnp.asarray(MAG, jnp.float32)
     fa32 = FIT_A(a32, jnp.float32(1.0))
