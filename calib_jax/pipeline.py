@@ -357,7 +357,8 @@ def fit_mag(
 
     c, W = raw_calibration(res.params, model, m, s, B)
     params = MagParams(hard_iron=c, soft_iron=W)
-    cov = raw_covariance(jax.lax.stop_gradient(res.params), res.covariance, model, m, s, B)
+    sg = jax.lax.stop_gradient  # the covariance is a constant under grad (see Fit)
+    cov = raw_covariance(sg(res.params), res.covariance, model, m, s, sg(B))
     if absolute_sigma:
         # The quadric residual e = r (|u|^2 - 1) is 2 r (|u| - 1) to first order, |u| - 1 being
         # the residual the weights are for (r = det(M_n)^(-1/6)): its covariance is 4 r^2 that
