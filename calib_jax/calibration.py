@@ -333,6 +333,20 @@ def split_params(p: np.ndarray) -> dict:
     return {"gains": p[0:3].tolist(), "nonorth": p[3:6].tolist(), "bias": p[6:9].tolist()}
 
 
+def ellipsoid_axes(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(semi-axes, R) of the ellipsoid (x - c)' M (x - c) = 1: R's columns are its axes (a
+    rotation, det +1; paper 2 eq. 18), semi-axes 1 / sqrt(eigenvalues) in their order. NaN
+    for a non-finite M (a failed solve: eigh would raise) and for an eigenvalue <= 0."""
+    M = np.asarray(M, float)
+    if not np.all(np.isfinite(M)):
+        return np.full(3, np.nan), np.full((3, 3), np.nan)
+    evals, R = np.linalg.eigh(M)
+    if np.linalg.det(R) < 0:
+        R[:, 0] = -R[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return 1.0 / np.sqrt(evals), R
+
+
 def apply_params(params: np.ndarray, raw: np.ndarray) -> np.ndarray:
     """a = alpha^-1 (raw - beta) in host-side numpy (no per-shape compilation; inside JAX use
     ``models.accel.correct``)."""
@@ -665,14 +679,8 @@ class MagCalibration:
         radius = float(field)
         code = int(fit.status)
         ok = bool(np.all(np.isfinite(W)))
-        if ok:
-            evals, R = np.linalg.eigh(W.T @ W / radius**2)
-            R = R * np.where(np.linalg.det(R) < 0, -1.0, 1.0)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                axes = 1.0 / np.sqrt(evals)
-            cover = sphere_coverage(y / r_y[:, None])[0]
-        else:
-            axes, R, cover = np.full(3, np.nan), np.full((3, 3), np.nan), 0.0
+        axes, R = ellipsoid_axes(W.T @ W / radius**2)
+        cover = sphere_coverage(y / r_y[:, None])[0] if ok else 0.0
         r0 = np.linalg.norm(x - x.mean(axis=0), axis=1)
         nr = np.linalg.norm(x, axis=1)
         pct = lambda e: float(100 * np.sqrt(np.mean(e**2)))  # noqa: E731

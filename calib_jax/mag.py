@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .calibration import MagCalibration
+from .calibration import MagCalibration, ellipsoid_axes
 from .geometry import (
     ellipsoid_fit_constrained_moments,
     moments,
@@ -358,14 +358,7 @@ def calibrate_mag(
     )
     centre, W = np.asarray(c), np.asarray(W)
     radius = float(field) if field is not None else float(natural_radius(jnp.asarray(M)))
-    if np.all(np.isfinite(M)):
-        evals, R = np.linalg.eigh(M)
-        if np.linalg.det(R) < 0:
-            R[:, 0] = -R[:, 0]
-    else:  # a failed solve (status "failed" below); eigh would raise "did not converge"
-        evals, R = np.full(3, np.nan), np.full((3, 3), np.nan)
-    with np.errstate(invalid="ignore"):
-        semi_axes = 1.0 / np.sqrt(evals)  # NaN for a non-ellipsoid (an eigenvalue <= 0)
+    semi_axes, R = ellipsoid_axes(M)  # NaN for a failed solve or a non-ellipsoid
 
     # standard errors of the returned centre (raw units) and W (output units per raw unit)
     se = np.sqrt(np.clip(np.diag(np.asarray(cov_cw)), 0.0, None))
