@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .calibration import AccelCalibration, apply_params
+from .calibration import AccelCalibration, FitStatusWarning, apply_params
 from .geometry import (
     ellipsoid_fit_moments,
     moments,
@@ -516,7 +516,11 @@ def calibrate_accel(
         source=source,
     )
     if status in ("failed", "not_converged"):
-        _warnings.warn(f"accelerometer calibration {status}: {cal.solver_message}", stacklevel=2)
+        _warnings.warn(
+            f"accelerometer calibration {status}: {cal.solver_message}",
+            FitStatusWarning,
+            stacklevel=2,
+        )
     return cal
 
 

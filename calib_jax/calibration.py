@@ -24,6 +24,12 @@ FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
 
 
+class FitStatusWarning(UserWarning):
+    """A calibration whose status is not ok. The result's ``status`` and ``warnings`` say the
+    same, so the CLI, which prints them, leaves this one out; filter it the same way when you
+    read the status yourself (``warnings.simplefilter("ignore", FitStatusWarning)``)."""
+
+
 @dataclass(frozen=True, eq=False)
 class AccelCalibration:
     """Outcome of :func:`calib_jax.calibrate_accel`.

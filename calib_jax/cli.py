@@ -784,6 +784,11 @@ def _error_text(exc: BaseException, args: argparse.Namespace) -> str:
     return msg
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line, like the notes; no source path (CALIB_JAX_DEBUG=1 keeps it)."""
+    print(f"warning: {message}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code (module docstring) and prints no traceback."""
     parser = build_parser()
@@ -798,6 +803,10 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():
             if not debug:  # numpy's 'Mean of empty slice' on odd input: the error line says it
                 warnings.simplefilter("ignore", RuntimeWarning)
+                from .calibration import FitStatusWarning
+
+                warnings.simplefilter("ignore", FitStatusWarning)  # the report says it
+                warnings.showwarning = _show_warning
             return args.func(args)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

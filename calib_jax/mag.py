@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .calibration import MagCalibration, ellipsoid_axes
+from .calibration import FitStatusWarning, MagCalibration, ellipsoid_axes
 from .geometry import (
     ellipsoid_fit_constrained_moments,
     moments,
@@ -453,7 +453,7 @@ def calibrate_mag(
         cause = cal.solver_message
         if is_converged(solver_status) and warn:
             cause = warn[-1]  # converged, but the data are not an ellipsoid
-        _warnings.warn(f"ellipsoid calibration {status}: {cause}", stacklevel=2)
+        _warnings.warn(f"ellipsoid calibration {status}: {cause}", FitStatusWarning, stacklevel=2)
     return cal
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -451,9 +452,11 @@ def calibrate_marg_log(
             )
             method = "ellipsoid"
     if method == "ellipsoid":
-        acal = calibrate_mag(
-            log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
-        )
+        with warnings.catch_warnings():  # a failed fit says why in its status and warnings
+            warnings.simplefilter("ignore", UserWarning)
+            acal = calibrate_mag(
+                log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
+            )
         if accel == "auto" and not acal.success:
             # a failed ellipsoid (too little of the sphere covered) would spoil the rotation
             why = "; ".join(acal.warnings) or acal.solver_message
@@ -462,9 +465,19 @@ def calibrate_marg_log(
                 "accelerometer is used as given"
             )
             acal, method = None, "none"
-    mcal = calibrate_mag(log, model=mag_model, field=field, solver=solver, sensor_id=sensor_id)
+    with warnings.catch_warnings():  # its status and warnings are in the record's mag block
+        warnings.simplefilter("ignore", UserWarning)
+        mcal = calibrate_mag(log, model=mag_model, field=field, solver=solver, sensor_id=sensor_id)
     acc = np.asarray(log.acc, float) if acal is None else acal.apply(log.acc)
-    al = align_mag_to_accel(acc, mcal.apply(log.mag))
+    try:
+        al = align_mag_to_accel(acc, mcal.apply(log.mag))
+    except ValueError as exc:
+        if mcal.success:
+            raise
+        why = "; ".join(mcal.warnings) or mcal.solver_message
+        raise ValueError(
+            f"{exc}. The magnetometer's ellipsoid fit is '{mcal.status}' too: {why}"
+        ) from exc
     statuses = [mcal.status, al.status] + ([] if acal is None else [acal.status])
     warn += [f"alignment: {w}" for w in al.warnings]
     return MARGRecord(

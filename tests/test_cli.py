@@ -211,6 +211,51 @@ def test_marg_on_the_ckexplorer_tumble(tmp_path, capsys):
         MARGRecord.from_dict(d["mag"])
 
 
+def test_marg_on_a_flat_log_says_why_in_one_error(tmp_path, capsys):
+    """A board that never tilts (gravity along +z, the magnetometer noise around a constant):
+    exit 2 with one error that names the unobservable rotation and the failed magnetometer fit,
+    and no Python warning lines (source paths, 'UserWarning') before it; the fits' complaints
+    are in the error, not printed twice."""
+    rng = np.random.default_rng(0)
+    n = 600
+    acc = np.array([0.0, 0.0, 1.0]) + 0.002 * rng.normal(size=(n, 3))
+    mag = np.array([20.0, 0.0, -40.0]) + 0.5 * rng.normal(size=(n, 3))
+    f = tmp_path / "flat.csv"
+    np.savetxt(f, np.hstack([acc, mag]), delimiter=",", header="ax,ay,az,mx,my,mz", comments="")
+    assert main(["marg", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "UserWarning" not in err and ".py:" not in err, err
+    (line,) = [e for e in err.splitlines() if e.startswith("error:")]
+    assert "gravity stays in about one direction" in line
+    assert "magnetometer's ellipsoid fit is 'failed'" in line
+
+
+def test_cli_prints_a_warning_as_one_line(tmp_path, capsys, monkeypatch):
+    """A warning raised inside a command (here one the command itself raises) is one
+    'warning: ...' line on stderr with no source path; a fit's FitStatusWarning is left out
+    because the printed report has its status and warnings."""
+    import warnings
+
+    def noisy(args):
+        warnings.warn("something odd about the log", UserWarning, stacklevel=1)
+        warnings.warn("the fit failed", cj.FitStatusWarning, stacklevel=1)
+        return 0
+
+    parser = cli.build_parser()
+    monkeypatch.setattr(cli, "build_parser", lambda: _with_func(parser, noisy))
+    assert main(["accel", str(demo_log_path())]) == 0
+    err = capsys.readouterr().err
+    assert err.splitlines() == ["warning: something odd about the log"], err
+
+
+def _with_func(parser, func):
+    """The parser with every subcommand's function replaced by ``func``."""
+    for action in parser._subparsers._group_actions:
+        for sub in action.choices.values():
+            sub.set_defaults(func=func)
+    return parser
+
+
 def test_marg_finds_a_swapped_magnetometer(tmp_path):
     """A magnetometer mounted with x and y swapped and z negated (det +1): the command reports
     that permutation, a rotation near zero after it, and the simulated dip."""
