@@ -31,6 +31,7 @@ _LAZY = {
     "estimate_attitude": (".attitude", "estimate_attitude"),
     "gauss_newton_quaternion": (".attitude", "gauss_newton_quaternion"),
     "BatchResult": (".batch", "BatchResult"),
+    "BatchRecord": (".calibration", "BatchRecord"),
     "calibrate_accel_batch": (".batch", "calibrate_accel_batch"),
     "calibrate_mag_batch": (".batch", "calibrate_mag_batch"),
     "AccelCalibration": (".calibration", "AccelCalibration"),
@@ -86,6 +87,7 @@ __version__ = "0.1.0"
 __all__ = [
     "pipeline",
     "BatchResult",
+    "BatchRecord",
     "calibrate_accel_batch",
     "calibrate_mag_batch",
     "solve_implicit",

@@ -36,9 +36,10 @@ from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 
 from .accel import MODELS as ACCEL_MODELS
 from .accel import _units_from_norm, initial_guess_moments
+from .calibration import BatchRecord
 from .geometry import moments
 from .linalg import cholesky_small, eigh_small, inv3
-from .lm import LMResult, Status, lm_solve, optx_solve
+from .lm import LMResult, lm_solve, optx_solve
 from .mag import ellipsoid_start_moments
 from .models.accel import alpha_matrix
 from .models.mag import (
@@ -49,6 +50,7 @@ from .models.mag import (
     raw_covariance,
     unpack,
 )
+from .status import Status, fit_status, is_converged, status_message
 
 MIN_SAMPLES = 20
 FLAT = 1e-3  # smallest / largest eigenvalue of the direction scatter: below is one plane
@@ -157,17 +159,63 @@ class BatchResult(eqx.Module):
     n_samples: Int[Array, " S"]
 
     @property
-    def success(self) -> np.ndarray:
-        from .lm import is_converged
+    def sensor(self) -> str:
+        """'accel' (nine parameters) or 'mag' (the ellipsoid's centre and W, twelve)."""
+        return "accel" if self.params.shape[-1] == 9 else "mag"
 
+    @property
+    def statuses(self) -> list[str]:
+        """The records' status word per sensor (:func:`calib_jax.status.fit_status`)."""
+        return [fit_status(int(s)) for s in np.asarray(self.status)]
+
+    @property
+    def success(self) -> np.ndarray:
         return np.array([is_converged(int(s)) for s in np.asarray(self.status)])
 
-    def rows(self, names=None) -> list[dict]:
-        """One dict per sensor: status, message, each parameter and its standard error, rms,
-        iterations, samples (``names`` labels the sensors, e.g. their files)."""
-        from .display import batch_rows
+    def entries(self, names: Sequence | None = None) -> list[dict]:
+        """One :class:`calib_jax.BatchRecord` entry per sensor (``names`` labels them, e.g.
+        their files; default the index)."""
+        params, stderr = np.asarray(self.params), np.asarray(self.stderr)
+        out = []
+        for i, code in enumerate(int(s) for s in np.asarray(self.status)):
+            out.append(
+                {
+                    "path": names[i] if names is not None else i,
+                    "status": fit_status(code),
+                    "solver_status": code,
+                    "message": status_message(code),
+                    "params": params[i].tolist(),
+                    "stderr": stderr[i].tolist(),
+                    "rms": float(self.rms[i]),
+                    "iterations": int(self.iterations[i]),
+                    "n_points": int(self.n_samples[i]),
+                }
+            )
+        return out
 
-        return batch_rows(self, names)
+    def to_record(self, names: Sequence | None = None) -> BatchRecord:
+        """The batch as a record that saves, loads and compares (:class:`calib_jax.BatchRecord`)."""
+        return BatchRecord(sensor=self.sensor, entries=self.entries(names))
+
+    def to_params(self):
+        """Every sensor's parameters as one stacked pytree (leading axis: sensors):
+        :class:`calib_jax.pipeline.AccelParams` or :class:`calib_jax.pipeline.MagParams`; vmap
+        over it. Sensors that were not fitted are in it too: mask them with :attr:`success`."""
+        from .models.accel import AccelParams
+        from .pipeline import MagParams
+
+        if self.sensor == "accel":
+            return jax.vmap(AccelParams.from_vector)(self.params)
+        return jax.vmap(lambda p: MagParams(hard_iron=p[:3], soft_iron=p[3:].reshape(3, 3)))(
+            self.params
+        )
+
+    def rows(self, names=None) -> list[dict]:
+        """One flat dict per sensor: file (``names`` or the index), status, message, each
+        parameter and its standard error by name, rms, iterations, points."""
+        from .display import fleet_rows
+
+        return fleet_rows(self.entries(names), self.sensor)
 
     def to_dataframe(self, names=None):
         """:meth:`rows` as a pandas DataFrame."""

@@ -15,10 +15,12 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from .models.layout import ALPHA_INDEX, PARAM_NAMES
+from .status import FIT_STATUSES, is_usable
 
 FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
@@ -85,7 +87,7 @@ class AccelCalibration:
     # ---- use -------------------------------------------------------------------------------
     @property
     def success(self) -> bool:
-        return self.status in ("ok", "poorly_determined")
+        return is_usable(self.status)
 
     @property
     def gains(self) -> np.ndarray:
@@ -124,7 +126,7 @@ class AccelCalibration:
         (N, 3) readings it was fitted to, ``g`` the magnitude it was given and ``units`` its
         unit. The status is the solver's: a pipeline fit has no pose detection, coverage or
         plausibility checks (a note says so; give ``calibrate_accel`` the log for them)."""
-        from .lm.status import fit_status, status_message
+        from .status import fit_status, status_message
 
         p = np.asarray(fit.params.to_vector(), float)
         cov = np.asarray(fit.covariance, float)
@@ -635,7 +637,7 @@ class MagCalibration:
 
     @property
     def success(self) -> bool:
-        return self.status in ("ok", "poorly_determined")
+        return is_usable(self.status)
 
     def apply(self, raw) -> np.ndarray:
         """Calibrated vectors W (raw - center) for one reading (3,), many (N, 3), or a loaded
@@ -673,8 +675,8 @@ class MagCalibration:
         samples it was fitted to, ``field`` and ``model`` the magnitude and model it was given.
         The status is the solver's: a pipeline fit has no coverage or plausibility checks (a
         note says so)."""
-        from .lm.status import fit_status, status_message
         from .sphere import sphere_coverage
+        from .status import fit_status, status_message
 
         c = np.asarray(fit.params.hard_iron, float)
         W = np.asarray(fit.params.soft_iron, float)
@@ -869,4 +871,125 @@ class MagCalibration:
     @classmethod
     def load(cls, path: str | Path) -> MagCalibration:
         """Read a saved calibration; a ValueError names the file, the key and the fault."""
+        return cls.from_dict(_read_json(path), source=path)
+
+
+_TEXT_KEYS = ("path", "status", "message", "units", "use", "notes", "warnings")
+"""Batch entry keys holding text: a file named 'nan' stays a name."""
+
+
+@dataclass(frozen=True, eq=False)
+class BatchRecord:
+    """Many sensors' calibrations, one entry per log: what :func:`calib_jax.fleet.calibrate_files`
+    yields and ``calib-jax batch --json`` writes, and :meth:`calib_jax.BatchResult.to_record`
+    gives for an in-memory batch.
+
+    Each entry is a dict: ``path`` (the log, or the sensor's name or index), ``status`` (a
+    :data:`calib_jax.status.FIT_STATUSES` word), ``solver_status``, ``message``, ``params``
+    (paper 1's nine for an accelerometer, the ellipsoid's centre and W row-major for a
+    magnetometer; empty when nothing was fitted), ``stderr``, ``rms``, ``iterations``,
+    ``n_points`` and what the way in found (units, g, static intervals, notes).
+    """
+
+    kind: ClassVar[str] = "batch"
+    sensor: str
+    """'accel' or 'mag'."""
+    entries: list[dict]
+    format_version: int = FORMAT_VERSION
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    @property
+    def statuses(self) -> list[str]:
+        return [e.get("status", "failed") for e in self.entries]
+
+    @property
+    def success(self) -> np.ndarray:
+        """Per entry: the parameters may be used (:func:`calib_jax.status.is_usable`)."""
+        return np.array([is_usable(s) for s in self.statuses], bool)
+
+    def to_params(self) -> dict:
+        """``{path: pytree}`` for every usable entry: :class:`calib_jax.pipeline.AccelParams` or
+        :class:`calib_jax.pipeline.MagParams` (JAX is imported here)."""
+        import jax.numpy as jnp
+
+        from .models.accel import AccelParams
+        from .pipeline import MagParams
+
+        out = {}
+        for e, ok in zip(self.entries, self.success, strict=True):
+            if not ok:
+                continue
+            p = jnp.asarray(e["params"], jnp.float64)
+            if self.sensor == "accel":
+                out[e["path"]] = AccelParams.from_vector(p)
+            else:
+                out[e["path"]] = MagParams(hard_iron=p[:3], soft_iron=p[3:].reshape(3, 3))
+        return out
+
+    def to_dataframe(self):
+        """One row per entry, the parameters by name (pandas; see
+        :func:`calib_jax.display.fleet_rows`)."""
+        from .display import fleet_rows, to_dataframe
+
+        return to_dataframe(fleet_rows(self.entries, self.sensor))
+
+    def __eq__(self, other) -> bool:
+        """Field by field; NaN equal to NaN."""
+        return _fields_equal(self, other)
+
+    __hash__ = None  # type: ignore[assignment]  # holds lists
+
+    def to_dict(self) -> dict:
+        return {
+            "format_version": self.format_version,
+            "kind": self.kind,
+            "sensor": self.sensor,
+            "results": _sanitize(self.entries),
+        }
+
+    def save(self, path: str | Path) -> None:
+        """Write the JSON atomically (:func:`write_json_atomic`)."""
+        write_json_atomic(path, self.to_dict())
+
+    @classmethod
+    def from_dict(cls, d: object, source: str | Path | None = None) -> BatchRecord:
+        """Rebuild from :meth:`to_dict`'s layout (also ``calib-jax batch --json`` files written
+        before 'kind' was, which have none); a ValueError names the file, the entry and the
+        fault."""
+        r = _Doc(d, source)
+        _check_version(r.d, r.where)
+        if r.d.get("kind", "batch") != "batch":
+            raise ValueError(
+                f"{r.where}not a batch of calibrations: kind is {r.d.get('kind')!r} (load it "
+                "with that kind's class, e.g. AccelCalibration.load)"
+            )
+        sensor = r.text("sensor")
+        if sensor not in ("accel", "mag"):
+            raise ValueError(f"{r.where}key 'sensor' must be 'accel' or 'mag', got {sensor!r}")
+        results = r.get("results")
+        if not isinstance(results, list) or not all(isinstance(e, dict) for e in results):
+            raise ValueError(f"{r.where}key 'results' must be a list of objects")
+        n = 9 if sensor == "accel" else 12
+        for i, e in enumerate(results):
+            status, params = e.get("status"), e.get("params") or []
+            if status not in FIT_STATUSES:
+                raise ValueError(
+                    f"{r.where}results[{i}] ({e.get('path')}): status {status!r} is not one of "
+                    f"{list(FIT_STATUSES)}"
+                )
+            if is_usable(status) and len(params) != n:
+                raise ValueError(
+                    f"{r.where}results[{i}] ({e.get('path')}): a {sensor} calibration has {n} "
+                    f"parameters, got {len(params)}"
+                )
+        entries = [
+            {k: v if k in _TEXT_KEYS else _unsanitize(v) for k, v in e.items()} for e in results
+        ]
+        return cls(sensor=sensor, entries=entries, format_version=r.d["format_version"])
+
+    @classmethod
+    def load(cls, path: str | Path) -> BatchRecord:
+        """Read a saved batch; a ValueError names the file, the entry and the fault."""
         return cls.from_dict(_read_json(path), source=path)

@@ -324,19 +324,23 @@ def run_batch(args: argparse.Namespace) -> int:
             progress=False if args.no_progress else None,
             **options,
         )
+    from .calibration import FORMAT_VERSION, _sanitize  # the layout of calib_jax.BatchRecord
+
     out = open(args.json, "w") if args.json else None  # noqa: SIM115
     n_ok = n_all = 0
     not_ok: list[str] = []
     table_rows: list[dict] = []
     try:
         if out:
-            head = json.dumps({"format_version": 1, "sensor": args.sensor})[:-1]
+            head = json.dumps(
+                {"format_version": FORMAT_VERSION, "kind": "batch", "sensor": args.sensor}
+            )[:-1]
             out.write(head + ', "results": [\n')
         for r in results:
             table_rows.append(r)
             # written as they arrive: a crash keeps what was calibrated so far
             if out:
-                out.write(("" if n_all == 0 else ",\n") + json.dumps(r))
+                out.write(("" if n_all == 0 else ",\n") + json.dumps(_sanitize(r)))
                 out.flush()
             n_all += 1
             n_ok += r["status"] == "ok"

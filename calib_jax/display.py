@@ -207,29 +207,6 @@ def fleet_rows(results, sensor: str | None = None) -> list[dict]:
     return rows
 
 
-def batch_rows(result, names=None) -> list[dict]:
-    """One row per sensor of a :class:`calib_jax.BatchResult`."""
-    from .lm.status import is_converged, status_message
-
-    params, stderr = np.asarray(result.params), np.asarray(result.stderr)
-    pnames = param_names("accel" if params.shape[1] == 9 else "mag")
-    rows = []
-    for i in range(params.shape[0]):
-        code = int(result.status[i])
-        row = {"sensor": names[i] if names is not None else i}
-        row["status"] = "ok" if is_converged(code) else "failed"
-        row["message"] = status_message(code)
-        row.update(zip(pnames, params[i].tolist(), strict=True))
-        row.update({f"se_{k}": v for k, v in zip(pnames, stderr[i].tolist(), strict=True)})
-        row.update(
-            rms=float(result.rms[i]),
-            iterations=int(result.iterations[i]),
-            n_samples=int(result.n_samples[i]),
-        )
-        rows.append(row)
-    return rows
-
-
 def to_dataframe(rows: list[dict]):
     """A pandas DataFrame of rows (pandas is needed only here)."""
     try:

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import AccelCalibration, MagCalibration, _read_json
+from .calibration import AccelCalibration, BatchRecord, MagCalibration, _read_json
 from .models.layout import ALPHA_INDEX
 
 FORMATS = ("c", "imu_tk", "imucal", "ros")
@@ -181,6 +181,14 @@ def _from_dict(d: dict, where) -> dict[str, Correction]:
     if kind == "ellipsoid":
         cal = MagCalibration.from_dict(d, source=where)
         return {cal.sensor: _ellipsoid(cal)}
+    if kind == "batch":
+        rec = BatchRecord.from_dict(d, source=where)
+        if len(rec) != 1:
+            raise ValueError(
+                f"{where}: a batch of {len(rec)} calibrations; export one entry in Python "
+                "(calib_jax.export.correction_from_result(BatchRecord.load(path).entries[i]))"
+            )
+        return {rec.sensor: correction_from_result(rec.entries[0])}
     return {"accel": _accel(AccelCalibration.from_dict(d, source=where))}
 
 

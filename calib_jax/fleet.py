@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 
 from .io.files import SensorLog, load_log
-from .lm import is_converged, status_message
 from .observations import accel_observations, screen_samples
 from .padding import bucket
 
@@ -115,23 +114,9 @@ def fit_prepared(
         r = calibrate_accel_batch(raw, mask, g=np.asarray(gs), min_points=10, **options)
     else:
         r = calibrate_mag_batch(raw, mask, **options)
-    params, stderr = np.asarray(r.params), np.asarray(r.stderr)
-    for i, (name, _, info) in enumerate(fit):
-        code = int(r.status[i])
-        out.append(
-            {
-                "path": str(name),
-                "status": "ok" if is_converged(code) else "failed",
-                "solver_status": code,
-                "message": status_message(code),
-                "params": params[i].tolist(),
-                "stderr": stderr[i].tolist(),
-                "rms": float(r.rms[i]),
-                "iterations": int(r.iterations[i]),
-                "n_points": int(r.n_samples[i]),
-                **info,
-            }
-        )
+    entries = r.entries([str(name) for name, _, _ in fit])
+    ref = {"field": options.get("field")} if sensor == "mag" else {}  # accel: each info's g
+    out += [{**e, **info, **ref} for e, (_, _, info) in zip(entries, fit, strict=True)]
     return out
 
 

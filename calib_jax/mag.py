@@ -61,6 +61,7 @@ from .models.mag import (
 from .observations import screen_samples
 from .padding import pad_rows
 from .sphere import sphere_coverage  # noqa: F401  (re-exported: calib_jax.mag.sphere_coverage)
+from .status import is_usable
 
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
 MagModel = Literal["sphere", "diag", "full", "auto"]
@@ -470,7 +471,7 @@ def _plausibility(
 ) -> str:
     """Downgrade a converged fit that no magnetometer ellipsoid explains (see the limits at the
     top of the module); appends the cause and the remedy to ``warn``."""
-    if status not in ("ok", "poorly_determined"):
+    if not is_usable(status):
         return status
     what = "magnetometer" if sensor == "mag" else "sensor"
     rms_before = float(100 * np.sqrt(np.mean(before**2)))

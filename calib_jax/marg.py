@@ -28,6 +28,7 @@ from .align import MagAccelAlignment, PlaneAlignment, align_mag_to_accel, plane_
 from .attitude import estimate_attitude
 from .calibration import AccelCalibration, MagCalibration, _read_json, _sanitize
 from .mag import calibrate_mag
+from .status import is_usable, worst_status
 
 
 @dataclass(frozen=True)
@@ -181,11 +182,6 @@ def evaluation_table(ev: dict[str, TurnEvaluation]) -> str:
 
 MARG_FORMAT_VERSION = 1
 ACCEL_METHODS = ("auto", "static", "ellipsoid", "none")
-_RANK = {"ok": 0, "poorly_determined": 1, "not_converged": 2, "failed": 3}
-
-
-def _worst(*statuses: str) -> str:
-    return max(statuses, key=lambda s: _RANK.get(s, 3))
 
 
 @dataclass(frozen=True, eq=False)
@@ -229,7 +225,7 @@ class MARGRecord:
 
     @property
     def success(self) -> bool:
-        return self.status in ("ok", "poorly_determined")
+        return is_usable(self.status)
 
     def _repr_html_(self) -> str:
         from .display import marg_html
@@ -496,7 +492,7 @@ def calibrate_marg_log(
         n_total=int(al.n_total),
         alignment_status=al.status,
         alignment_message=al.message,
-        status=_worst(*statuses),
+        status=worst_status(*statuses),
         warnings=warn,
         source=log.path,
         date=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),

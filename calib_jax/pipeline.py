@@ -53,11 +53,11 @@ from jaxtyping import Array, ArrayLike, Float, Int, Real
 
 from .accel import fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
-from .lm.status import CONVERGED_STATUSES, Status
 from .mag import fit_ellipsoid_normalized
 from .models.accel import AccelParams
 from .models.mag import natural_radius, raw_calibration, raw_covariance, unpack
 from .rotations import euler_zyx_deg, rotvec_to_dcm
+from .status import CONVERGED_STATUSES, Status
 
 __all__ = [
     "AccelParams",

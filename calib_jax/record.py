@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import split_params, write_json_atomic
+from .calibration import BatchRecord, write_json_atomic
 from .io.serial import Batch, SerialReader, log_columns
 from .static import detect_static, distinct_directions
 
@@ -547,9 +547,12 @@ def calibrate_devices(
     static-interval means; magnetometer: the full ellipsoid on every finite sample. ``g``
     defaults to each log's unit (1 g, or 9.80665 for m/s^2; batch.reference_for_log); a
     given ``g`` that contradicts a log's unit is a ValueError naming the log, before anything
-    is written. A log that cannot be prepared gets a ``load_error`` block; the others are
-    fitted. Returns one dict per device (also what is written): ``{"accel": {...}, "mag":
-    {...}}``.
+    is written. A log that cannot be prepared gets a ``load_error`` entry; the others are
+    fitted. Each device's sensor is written where a single port writes it
+    (:func:`calibration_paths`) as a :class:`calib_jax.BatchRecord` of one entry (load it with
+    ``BatchRecord.load``). Returns one dict per device: ``{"sensor_id", "source", "accel":
+    entry, "mag": entry}`` (the sensors recorded), with ``save_error`` when a file could not be
+    written.
     """
     from .batch import reference_for_log
     from .fleet import fit_prepared, prepare_log
@@ -559,8 +562,7 @@ def calibrate_devices(
     logs = [load_log(p) for p in paths]
     ids = list(sensor_ids) if sensor_ids is not None else [str(p) for p in paths]
     results: list[dict] = [
-        {"format_version": 1, "kind": "batch", "sensor_id": i, "source": str(p)}
-        for i, p in zip(ids, paths, strict=True)
+        {"sensor_id": i, "source": str(p)} for i, p in zip(ids, paths, strict=True)
     ]
     kinds = {"accel": ["accel"], "mag": ["mag"], "marg": ["accel", "mag"]}[sensor]
     for kind in kinds:
@@ -574,7 +576,7 @@ def calibrate_devices(
             try:
                 pts, info = prepare_log(lg, kind, **detector)
             except ValueError as exc:
-                results[i][kind] = {"status": "load_error", "message": f"{p}: {exc}"}
+                results[i][kind] = {"path": str(p), "status": "load_error", "message": str(exc)}
                 continue
             if kind == "accel":
                 try:
@@ -585,31 +587,15 @@ def calibrate_devices(
         options = {"g": g} if kind == "accel" else {"field": field}
         for r in fit_prepared(prepared, kind, {**options, "solver": solver}):
             i = int(r["path"])
-            p, s = np.asarray(r["params"]), np.asarray(r["stderr"])
-            if kind == "accel":
-                block = {
-                    "params": split_params(p),
-                    "stderr": split_params(s),
-                    "g": r["g"],
-                    "static_intervals": r["static_intervals"],
-                }
-            else:
-                block = {
-                    "center": p[0:3].tolist(),
-                    "soft_iron": p[3:12].reshape(3, 3).tolist(),
-                    "stderr_center": s[0:3].tolist(),
-                    "field": field,
-                }
-            block.update(
-                {k: r[k] for k in ("status", "solver_status", "message", "rms", "iterations")},
-                n_points=r["n_points"],
-                notes=r["notes"],
-            )
-            results[i][kind] = block
+            results[i][kind] = {**r, "path": str(paths[i]), "sensor_id": ids[i]}
     for i, (res, p) in enumerate(zip(results, paths, strict=True)):
-        target = Path(p).with_suffix(".calib.json")
         errors: list[str] = []
-        wrote = _save(lambda t=target, r=res: write_json_atomic(t, r), target, errors)
+        wrote = ""
+        targets = calibration_paths(p, sensor)
+        for kind in kinds:
+            rec = BatchRecord(sensor=kind, entries=[res[kind]])
+            target = targets[kind]
+            wrote += _save(lambda t=target, r=rec: r.save(t), target, errors)
         say(f"[{i}] {res['sensor_id']}: " + _batch_line(res) + wrote)
         if errors:
             res["save_error"] = errors[0]  # not in the file (it could not be written)
@@ -636,17 +622,19 @@ def _save(write: Callable[[], None], target: Path, errors: list[str]) -> str:
 def _batch_line(res: dict) -> str:
     out = []
     for kind in ("accel", "mag"):
-        if res.get(kind, {}).get("status") == "load_error":
-            out.append(f"{kind} not calibrated: {res[kind]['message']}")
-    if res.get("accel", {}).get("status", "load_error") != "load_error":
-        a = res["accel"]
-        out.append(
-            f"accel {a['status']} gains {_fmt(a['params']['gains'])} bias "
-            f"{_fmt(a['params']['bias'])} rms {a['rms']:.2e}"
+        e = res.get(kind)
+        if e is None:
+            continue
+        if e["status"] == "load_error":
+            out.append(f"{kind} not calibrated: {e['message']}")
+            continue
+        p = e["params"]
+        what = (
+            f"gains {_fmt(p[0:3])} bias {_fmt(p[6:9])}"
+            if kind == "accel"
+            else f"center {_fmt(p[0:3])}"
         )
-    if res.get("mag", {}).get("status", "load_error") != "load_error":
-        m = res["mag"]
-        out.append(f"mag {m['status']} center {_fmt(m['center'])} rms {m['rms']:.2e}")
+        out.append(f"{kind} {e['status']} {what} rms {e['rms']:.2e}")
     return "; ".join(out)
 
 

@@ -8,6 +8,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
+import calib_jax as cj
 from calib_jax.calibration import AccelCalibration
 from calib_jax.models.layout import PARAM_NAMES
 
@@ -118,7 +119,7 @@ def test_diagnosis_html_has_the_steps_and_the_candidates():
     assert "temperature" in text and "bic, loo" in text  # the failed tests are named
 
 
-def test_batch_result_rows_are_its_numbers():
+def test_batch_result_rows_are_its_numbers(tmp_path):
     """BatchResult.rows / to_dataframe: one row per sensor, the parameters by name."""
     import jax.numpy as jnp
 
@@ -135,8 +136,15 @@ def test_batch_result_rows_are_its_numbers():
         iterations=jnp.asarray([5, 0]),
         n_samples=jnp.asarray([400, 3]),
     )
+    # the stacked pytree and the record (the failed sensor's NaN rms survives the JSON)
+    np.testing.assert_array_equal(r.to_params().to_vector(), p)
+    assert r.statuses == ["ok", "failed"]
+    rec = r.to_record(names=["a.csv", "b.csv"])
+    rec.save(tmp_path / "batch.json")
+    assert cj.BatchRecord.load(tmp_path / "batch.json") == rec
+    assert np.isnan(rec.entries[1]["rms"]) and rec.entries[0]["n_points"] == 400
     rows = r.rows(names=["a.csv", "b.csv"])
-    assert [row["sensor"] for row in rows] == ["a.csv", "b.csv"]
+    assert [row["file"] for row in rows] == ["a.csv", "b.csv"]
     assert [row["status"] for row in rows] == ["ok", "failed"]
     assert [rows[0][n] for n in PARAM_NAMES] == p[0].tolist()
     text = _parsed_text(r._repr_html_())

@@ -151,6 +151,23 @@ def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
             assert float(row["se_beta_z"]) == res["stderr"][8]
         else:
             assert row["message"] == res["message"] and row["alpha_x"] == ""
+    # the file is a BatchRecord: it loads, saves and loads again equal (a file written before
+    # 'kind' was, without it, loads too); its pytrees are the printed parameters
+    rec = cj.BatchRecord.load(out)
+    assert rec.sensor == "accel" and rec.statuses == [r["status"] for r in doc["results"]]
+    rec.save(tmp_path / "again.json")
+    assert cj.BatchRecord.load(tmp_path / "again.json") == rec
+    old = {k: v for k, v in doc.items() if k != "kind"}
+    assert cj.BatchRecord.from_dict(old) == rec
+    params = rec.to_params()
+    assert list(params) == [r["path"] for r in doc["results"] if r["status"] == "ok"]
+    for r in doc["results"]:
+        if r["status"] == "ok":
+            np.testing.assert_array_equal(params[r["path"]].to_vector(), r["params"])
+    with pytest.raises(ValueError, match="not one of"):
+        cj.BatchRecord.from_dict({**doc, "results": [{**doc["results"][0], "status": "fine"}]})
+    with pytest.raises(ValueError, match="not a batch"):
+        cj.BatchRecord.from_dict({**doc, "kind": "accel"})
     pd = pytest.importorskip("pandas")
     frame = to_dataframe(doc["results"])
     assert isinstance(frame, pd.DataFrame) and len(frame) == 6

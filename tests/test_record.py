@@ -11,6 +11,7 @@ import tty
 import numpy as np
 import pytest
 
+import calib_jax as cj
 from calib_jax.cli import main
 from calib_jax.io.serial import LogWriter, format_row
 from calib_jax.io.sim_device import simulate_session
@@ -153,13 +154,12 @@ def test_record_command_two_boards_one_batch_fit(tmp_path, capsys, tol):
     assert "poses" in captured.err and "stopped after" in captured.err
     for k in range(2):
         log = tmp_path / f"rec.dev{k}.csv"
-        res = json.loads((tmp_path / f"rec.dev{k}.calib.json").read_text())
-        assert res["kind"] == "batch" and res["source"] == str(log)
-        a = res["accel"]
-        assert a["status"] == "ok" and a["static_intervals"] >= 20
+        rec = cj.BatchRecord.load(tmp_path / f"rec.dev{k}.calib.json")
+        assert rec.sensor == "accel" and len(rec) == 1
+        a = rec.entries[0]
+        assert a["path"] == str(log) and a["status"] == "ok" and a["static_intervals"] >= 20
         truth = json.loads((tmp_path / f"imu{k}.json").read_text())
-        p = np.concatenate([a["params"][b] for b in ("gains", "nonorth", "bias")])
-        se = np.concatenate([a["stderr"][b] for b in ("gains", "nonorth", "bias")])
+        p, se = np.asarray(a["params"]), np.asarray(a["stderr"])
         # the fit of the interval means (2 mg noise over ~20 poses of ~75 samples each)
         assert np.all(np.abs(p - truth["accel_params"]) <= tol.N_SIGMA * se), (
             p - truth["accel_params"]
@@ -236,8 +236,8 @@ def test_one_dead_board_does_not_cost_the_other_its_calibration(tmp_path, capsys
     assert rc == 1, err
     assert "nothing was recorded into" in err and str(dead) in err
     assert "calibrating the other 1 device" in err
-    res = json.loads(good.with_suffix(".calib.json").read_text())
-    assert res["status"] == "ok" if "status" in res else res["accel"]["status"] == "ok"
+    # one live board: calibrated as a single port calibrates, an AccelCalibration
+    assert cj.AccelCalibration.load(good.with_suffix(".calib.json")).status == "ok"
     assert not dead.with_suffix(".calib.json").exists()
 
 
@@ -279,9 +279,22 @@ def test_batch_of_marg_logs(tmp_path):
     for r, tr in zip(res, truths, strict=True):
         assert r["accel"]["status"] == "ok" and r["mag"]["status"] == "ok"
         # centre: well inside the 0.2 uT noise times a few over thousands of samples
-        np.testing.assert_allclose(r["mag"]["center"], tr["mag_center"], atol=0.05)
-        np.testing.assert_allclose(r["mag"]["soft_iron"], tr["mag_soft_iron"], atol=2e-3)
-        assert json.loads(paths[0].with_suffix(".calib.json").read_text())["mag"]["field"] == 45.0
+        params = r["mag"]["params"]
+        np.testing.assert_allclose(params[:3], tr["mag_center"], atol=0.05)
+        np.testing.assert_allclose(np.reshape(params[3:], (3, 3)), tr["mag_soft_iron"], atol=2e-3)
+    # each sensor where a single port writes it: a BatchRecord of one entry
+    for p, r in zip(paths, res, strict=True):
+        for kind in ("accel", "mag"):
+            rec = cj.BatchRecord.load(p.with_suffix(f".{kind}.calib.json"))
+            assert rec == cj.BatchRecord(kind, [r[kind]])
+        assert rec.entries[0]["field"] == 45.0
+        hard_iron = rec.to_params()[str(p)].hard_iron
+        np.testing.assert_array_equal(hard_iron, r["mag"]["params"][:3])
+        # and `calib-jax export` reads it (a one-entry batch is that sensor's calibration)
+        from calib_jax import export
+
+        corr = export.read(p.with_suffix(".mag.calib.json"))["mag"]
+        np.testing.assert_array_equal(corr.bias, r["mag"]["params"][:3])
 
 
 def test_batch_path_checks_g_against_the_unit(tmp_path):

@@ -1,9 +1,17 @@
 """Least-squares solvers: Gavin's Levenberg-Marquardt in JAX and an optimistix cross-check."""
 
+from ..status import (
+    FIT_STATUSES,
+    Status,
+    fit_status,
+    is_converged,
+    is_usable,
+    status_message,
+    worst_status,
+)
 from .gavin import DEFAULTS, GAVIN_DEFAULTS, LMDefaults, finite_difference_jacobian, lm_solve
 from .optx import optx_solve
 from .result import LMHistory, LMResult, uncertainty, uncertainty_cholesky
-from .status import Status, fit_status, is_converged, status_message
 
 __all__ = [
     "DEFAULTS",
@@ -14,6 +22,9 @@ __all__ = [
     "Status",
     "finite_difference_jacobian",
     "fit_status",
+    "FIT_STATUSES",
+    "is_usable",
+    "worst_status",
     "is_converged",
     "lm_solve",
     "optx_solve",

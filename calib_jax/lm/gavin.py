@@ -66,8 +66,8 @@ import jax
 import jax.numpy as jnp
 
 from ..linalg import cho_solve_small
+from ..status import Status
 from .result import LMHistory, LMResult, uncertainty, uncertainty_cholesky
-from .status import Status
 
 _RUNNING = -1
 

@@ -14,8 +14,8 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ..status import Status
 from .result import LMResult, uncertainty, uncertainty_cholesky
-from .status import Status
 
 
 def optx_solve(

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ..linalg import cholesky_small, eigh_small
-from .status import is_converged, status_message
+from ..status import is_converged, status_message
 
 
 class LMHistory(eqx.Module):

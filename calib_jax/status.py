@@ -1,4 +1,4 @@
-"""Status codes of the least-squares solvers.
+"""Status codes of the least-squares solvers and the status words of the calibration records.
 
 Inside ``jit`` a solver never raises: it returns one of these integers. The host side turns
 them into messages (:func:`status_message`) and, where the user asked for it, exceptions.
@@ -83,6 +83,33 @@ def status_message(status: int) -> str:
 def is_converged(status: int) -> bool:
     """True for the statuses that mean the solver found a minimum."""
     return Status(int(status)) in CONVERGED_STATUSES
+
+
+FIT_STATUSES = {
+    "ok": "converged, and the data determine every parameter",
+    "poorly_determined": (
+        "converged, but some parameter is not pinned down by the data (see the record's "
+        "poorly_determined and warnings); usable with care"
+    ),
+    "not_converged": "the solver's budget ran out; the parameters are its last iterate",
+    "failed": "nothing usable: not fitted, a singular or non-finite problem, or a result the "
+    "data contradict (see the record's warnings)",
+    "load_error": "a batch entry whose log could not be read or turned into observations; "
+    "nothing was fitted (its message says why)",
+}
+"""The status word of every calibration record (accelerometer, ellipsoid, MARG, batch entry),
+best first. Solver codes (:class:`Status`) map onto the first four with :func:`fit_status`."""
+
+
+def is_usable(word: str) -> bool:
+    """True for the status words whose parameters may be used: "ok", "poorly_determined"."""
+    return word in ("ok", "poorly_determined")
+
+
+def worst_status(*words: str) -> str:
+    """The worst of several status words (an unknown word counts as "failed")."""
+    rank = list(FIT_STATUSES)
+    return max(words, key=lambda w: rank.index(w) if w in rank else len(rank))
 
 
 def fit_status(status: int, usable: bool = True) -> str:
