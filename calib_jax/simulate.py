@@ -87,6 +87,15 @@ class SimulatedLog:
         return PARAM_NAMES
 
 
+def alpha_beta(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Paper 1's nine-vector as the gain matrix alpha (3 x 3, symmetric) and the bias beta;
+    the reading is a' = alpha a + beta (numpy; :func:`calib_jax.models.accel.alpha_matrix` is
+    the JAX one)."""
+    p = np.asarray(params, float)
+    alpha = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
+    return alpha, p[6:9]
+
+
 def _slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
     cos = np.clip(a @ b, -1.0, 1.0)
     ang = np.arccos(cos)
@@ -101,6 +110,38 @@ def _slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
         return np.cos(th) * a + np.sin(th) * perp
     sa = np.sin(ang)
     return (np.sin((1 - s) * ang)[:, None] * a + np.sin(s * ang)[:, None] * b) / sa
+
+
+def pose_path(
+    directions: np.ndarray,
+    samples_per_pose: int | np.ndarray,
+    transition_samples: int | np.ndarray,
+    initial_rest: int = 0,
+    hand_motion: float = 0.1,
+    rng: np.random.Generator | int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The specific force (in units of g, sensor frame) of a pose-and-move protocol, and the
+    pose of each sample (-1 while moving): each unit gravity direction held for its samples
+    (the first ``initial_rest`` longer), a slerp to the next over the transition samples plus
+    a smooth hand acceleration of peak ``hand_motion`` (none drawn when it is 0)."""
+    rng = np.random.default_rng(rng)
+    dirs = np.asarray(directions, float)
+    hold = np.broadcast_to(np.asarray(samples_per_pose, int), (len(dirs),))
+    move = np.broadcast_to(np.asarray(transition_samples, int), (max(len(dirs) - 1, 0),))
+    acc, pose = [], []
+    for i, d in enumerate(dirs):
+        n_hold = int(hold[i]) + (initial_rest if i == 0 else 0)
+        acc.append(np.repeat(d[None], n_hold, axis=0))
+        pose.append(np.full(n_hold, i))
+        if i + 1 < len(dirs) and move[i] > 0:
+            s = np.linspace(0.0, 1.0, int(move[i]) + 2)[1:-1]
+            path = _slerp(d, dirs[i + 1], s)
+            if hand_motion:
+                bump = np.sin(np.pi * s)[:, None] * rng.normal(size=3)[None, :]
+                path = path + bump * (hand_motion / max(np.abs(bump).max(), 1e-12))
+            acc.append(path)
+            pose.append(np.full(int(move[i]), -1))
+    return np.concatenate(acc), np.concatenate(pose)
 
 
 def simulate_accel(
@@ -143,30 +184,9 @@ def simulate_accel(
     params = np.asarray(params, dtype=float)
     dirs = paper48_directions() if directions is None else np.asarray(directions, float)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    alpha = np.array(
-        [
-            [params[0], params[3], params[4]],
-            [params[3], params[1], params[5]],
-            [params[4], params[5], params[2]],
-        ]
-    )
-    beta = params[6:9]
-    hold = np.broadcast_to(np.asarray(samples_per_pose, int), (len(dirs),))
-    move = np.broadcast_to(np.asarray(transition_samples, int), (max(len(dirs) - 1, 0),))
-    acc, pose = [], []
-    for i, d in enumerate(dirs):
-        n_hold = int(hold[i]) + (initial_rest if i == 0 else 0)
-        acc.append(np.repeat(d[None] * g, n_hold, axis=0))
-        pose.append(np.full(n_hold, i))
-        if i + 1 < len(dirs) and move[i] > 0:
-            s = np.linspace(0.0, 1.0, int(move[i]) + 2)[1:-1]
-            path = _slerp(d, dirs[i + 1], s) * g
-            bump = np.sin(np.pi * s)[:, None] * rng.normal(size=3)[None, :]
-            bump *= hand_motion * g / max(np.abs(bump).max(), 1e-12)
-            acc.append(path + bump)
-            pose.append(np.full(int(move[i]), -1))
-    a = np.concatenate(acc)
-    raw = a @ alpha.T + beta + rng.normal(scale=noise, size=a.shape)
+    alpha, beta = alpha_beta(params)
+    a, pose = pose_path(dirs, samples_per_pose, transition_samples, initial_rest, hand_motion, rng)
+    raw = (a * g) @ alpha.T + beta + rng.normal(scale=noise, size=a.shape)
     if quantize:
         raw = np.round(raw)
     t = np.arange(len(raw)) / sample_rate
@@ -175,7 +195,7 @@ def simulate_accel(
         raw=raw,
         params=params,
         g=float(g),
-        pose=np.concatenate(pose),
+        pose=pose,
         directions=dirs,
         sample_rate=float(sample_rate),
     )
@@ -295,6 +315,8 @@ def simulate_marg(
     R_mag_board: np.ndarray | None = None,
     acc_center: np.ndarray | None = None,
     acc_soft_iron: np.ndarray | None = None,
+    acc_params: np.ndarray | None = None,
+    linear_acc: np.ndarray | None = None,
     acc_noise: float = 2e-3,
     mag_noise: float = 0.2,
     sample_rate: float = 100.0,
@@ -305,8 +327,10 @@ def simulate_marg(
     The accelerometer reads the upward specific force (static: no linear acceleration), the
     magnetometer the field [0, cos dip, -sin dip] * field in ENU, each in its own frame,
     the magnetometer through the ellipsoid (raw = W^-1 m + center), the accelerometer through
-    its own (``acc_center``, ``acc_soft_iron``; default none: already calibrated), plus white
-    noise.
+    its own (``acc_center``, ``acc_soft_iron``; default none: already calibrated) or through
+    paper 1's model (``acc_params``: a' = alpha a + beta), plus white noise. ``linear_acc``
+    (N, 3), in g in the accelerometer frame, adds the hand's acceleration to the specific
+    force (moves between poses).
     """
     rng = np.random.default_rng(rng)
     C = _quat_to_dcm_np(np.asarray(quat, float))  # body -> nav
@@ -322,7 +346,10 @@ def simulate_marg(
     a_s = a_body @ Ra  # Ra' a  (row vectors)
     m_s = m_body @ Rm
     raw_m = m_s @ np.linalg.inv(W).T + c
-    raw_a = a_s
+    raw_a = a_s if linear_acc is None else a_s + np.asarray(linear_acc, float)
+    if acc_params is not None:
+        alpha, beta = alpha_beta(acc_params)
+        raw_a = raw_a @ alpha.T + beta
     if acc_soft_iron is not None:
         raw_a = raw_a @ np.linalg.inv(np.asarray(acc_soft_iron, float)).T
     if acc_center is not None:
@@ -341,3 +368,84 @@ def simulate_marg(
         R_mag_board=Rm,
         sample_rate=float(sample_rate),
     )
+
+
+# ---------------------------------------------------------------------------------------------
+# a recording session: poses held still and hand-held moves, both sensors (the recorder's and
+# the simulated serial board's data)
+
+
+def simulate_session(
+    *,
+    poses: int = 24,
+    hold: float = 1.0,
+    move: float = 0.3,
+    rate: float = 100.0,
+    acc_noise: float = 2e-3,
+    mag_noise: float = 0.2,
+    field: float = 45.0,
+    dip_deg: float = 60.0,
+    hand_motion: float = 0.1,
+    seed: int = 0,
+) -> dict:
+    """A board held in ``poses`` static poses (a Fibonacci lattice of gravity directions,
+    random heading) for ``hold`` s each, joined by ``move`` s hand-held moves (a slerp plus a
+    smooth acceleration of up to ``hand_motion`` g), read by :func:`simulate_marg` with a
+    random paper-1 accelerometer (:func:`random_params`) and a random ellipsoid
+    (:func:`random_ellipsoid`). Returns t (N,), acc (N, 3) in g, mag (N, 3) in uT, pose (N,)
+    (index, -1 while moving) and the truth."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    from .sphere import sphere_cells
+
+    rng = np.random.default_rng(seed)
+    params = random_params(rng, gain_spread=0.05, nonorth_spread=0.02, bias_spread=0.05)
+    center, W = random_ellipsoid(rng, radius=field, axis_spread=0.2, center_spread=0.5)
+    rots = []
+    for d in sphere_cells(poses):
+        # sensor -> world rotation taking the measured 'up' direction d to world +z
+        align, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [d])
+        rots.append(Rotation.from_euler("z", rng.uniform(0, 2 * np.pi)) * align)
+    n_hold, n_move = max(int(round(hold * rate)), 1), max(int(round(move * rate)), 0)
+    R_list, pose, bump = [], [], []
+    for k in range(poses):
+        R_list.append(np.repeat(rots[k].as_matrix()[None], n_hold, axis=0))
+        pose.append(np.full(n_hold, k))
+        bump.append(np.zeros((n_hold, 3)))
+        if k + 1 < poses and n_move:
+            s = np.linspace(0.0, 1.0, n_move + 2)[1:-1]
+            key = Rotation.concatenate([rots[k], rots[k + 1]])
+            R_list.append(Slerp([0.0, 1.0], key)(s).as_matrix())
+            pose.append(np.full(n_move, -1))
+            b = np.sin(np.pi * s)[:, None] * rng.normal(size=3)[None, :]
+            bump.append(b * hand_motion / max(np.abs(b).max(), 1e-12))
+    sim = simulate_marg(
+        _dcm_to_quat_np(np.concatenate(R_list)),  # sensor -> world: the body -> nav attitude
+        center=center,
+        soft_iron=W,
+        field=field,
+        dip_deg=dip_deg,
+        acc_params=params,
+        linear_acc=np.concatenate(bump),
+        acc_noise=acc_noise,
+        mag_noise=mag_noise,
+        sample_rate=rate,
+        rng=rng,
+    )
+    return {
+        "t": np.arange(len(sim.acc)) / rate,
+        "acc": sim.acc,
+        "mag": sim.mag,
+        "pose": np.concatenate(pose),
+        "truth": {
+            "accel_params": params.tolist(),
+            "mag_center": center.tolist(),
+            "mag_soft_iron": W.tolist(),
+            "field": field,
+            "dip_deg": dip_deg,
+            "acc_noise": acc_noise,
+            "mag_noise": mag_noise,
+            "poses": poses,
+            "rate": rate,
+        },
+    }

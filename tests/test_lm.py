@@ -214,7 +214,7 @@ def test_bad_arguments_raise_with_the_fix():
 def _session_means(seed):
     # the 24 static-pose means of a simulated session, normalised as calibrate_accel does
     from calib_jax.geometry import sphere_fit
-    from calib_jax.io.sim_device import simulate_session
+    from calib_jax.simulate import simulate_session
     from calib_jax.static import detect_static
 
     acc = simulate_session(poses=24, hold=1.0, move=0.3, rate=100, seed=seed)["acc"]
@@ -260,7 +260,7 @@ def test_calibrate_accel_strided_and_contiguous_both_converge(tol):
     # the reported case: simulate_session(seed=114), lm1 gave "not_converged" after 200
     # iterations at the optimum; lm2 and optimistix converged
     from calib_jax import calibrate_accel
-    from calib_jax.io.sim_device import simulate_session
+    from calib_jax.simulate import simulate_session
 
     s = simulate_session(poses=24, hold=1.0, move=0.3, rate=100, seed=114)
     rows = np.column_stack([s["t"], s["acc"]])

@@ -14,7 +14,6 @@ import pytest
 import calib_jax as cj
 from calib_jax.cli import main
 from calib_jax.io.serial import LogWriter, format_row
-from calib_jax.io.sim_device import simulate_session
 from calib_jax.record import (
     PAPER1_POSES,
     assess_coverage,
@@ -30,6 +29,7 @@ from calib_jax.simulate import (
     random_params,
     simulate_accel,
     simulate_marg,
+    simulate_session,
     tumble_quaternions,
 )
 

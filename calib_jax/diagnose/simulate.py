@@ -1,9 +1,12 @@
 """Simulated logs with known effects, to check that the loop finds what is there (and only that).
 
-Accelerometer: ``poses`` static poses of ``hold`` samples at ``rate`` Hz (uniformly random
-gravity directions, the first pose ``first_hold`` samples long, like the rest imu_tk logs start
-with), joined by short moves, a random nine-parameter base calibration, white noise, and any
-of the effects below added in the same form :mod:`calib_jax.diagnose.model` fits them.
+The effects layer of :mod:`calib_jax.simulate` (which gives the poses, the base calibration
+and the moves). Accelerometer: ``poses`` static poses of ``hold`` samples at ``rate`` Hz
+(uniformly random gravity directions, the first pose ``first_hold`` samples long, like the
+rest imu_tk logs start with), joined by short moves (:func:`calib_jax.simulate.pose_path`),
+a random nine-parameter base calibration (:func:`calib_jax.simulate.random_params`), white
+noise, and any of the effects below added in the same form :mod:`calib_jax.diagnose.model`
+fits them.
 Magnetometer: a slow random tumble of ``samples`` samples after a rest, on a random ellipsoid.
 
 Effects (all sizes in units of g or of the field):
@@ -26,11 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..simulate import alpha_beta, pose_path, random_directions, random_params
+
 DIRS = np.array([1.0, -0.7, 0.5])
 
 
 @dataclass
-class SimulatedLog:
+class SimulatedEffectsLog:
     raw: np.ndarray  # (N, 3)
     t: np.ndarray  # (N,) s
     temp: np.ndarray  # (N,) degrees C
@@ -42,13 +47,10 @@ class SimulatedLog:
     disturbed: tuple[int, ...] = ()  # poses moved by ``outliers``
 
 
-def _random_alpha(rng) -> tuple[np.ndarray, np.ndarray]:
-    A = np.diag(1 + 0.05 * rng.uniform(-1, 1, 3))
-    s = 0.02 * rng.uniform(-1, 1, 3)
-    A[0, 1] = A[1, 0] = s[0]
-    A[0, 2] = A[2, 0] = s[1]
-    A[1, 2] = A[2, 1] = s[2]
-    return A, 0.05 * rng.uniform(-1, 1, 3)
+def _random_base(rng) -> tuple[np.ndarray, np.ndarray]:
+    """A random nine-parameter base calibration (gains 1 +- 0.05, non-orthogonality +- 0.02,
+    bias +- 0.05), as (alpha, beta)."""
+    return alpha_beta(random_params(rng, gain_spread=0.05, nonorth_spread=0.02, bias_spread=0.05))
 
 
 def _drivers(t, rng):
@@ -94,32 +96,19 @@ def simulate_accel_log(
     rate: float = 100.0,
     noise: float = 2e-3,
     seed: int = 0,
-) -> SimulatedLog:
+) -> SimulatedEffectsLog:
     rng = np.random.default_rng(seed)
-    alpha, b = _random_alpha(rng)
-    dirs = rng.normal(size=(poses, 3))
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    u, pose, intervals = [], [], []
-    n = 0
-    for k in range(poses):
-        h = first_hold if k == 0 else hold
-        intervals.append((n, n + h))
-        u.append(np.repeat(dirs[k][None], h, 0))
-        pose.append(np.full(h, k))
-        n += h
-        if k + 1 < poses:
-            s = np.linspace(0, 1, move + 2)[1:-1, None]
-            v = (1 - s) * dirs[k] + s * dirs[k + 1]
-            u.append(v / np.linalg.norm(v, axis=1, keepdims=True))
-            pose.append(np.full(move, -1))
-            n += move
-    u = np.concatenate(u)
-    pose = np.concatenate(pose)
+    alpha, b = _random_base(rng)
+    dirs = random_directions(poses, rng)
+    # the moves carry no hand acceleration: the diagnosis reads the poses only
+    u, pose = pose_path(dirs, hold, move, first_hold - hold, hand_motion=0.0, rng=rng)
+    first = [int(np.argmax(pose == k)) for k in range(poses)]
+    intervals = [(i, i + int(np.sum(pose == k))) for k, i in enumerate(first)]
     t = np.arange(len(u)) / rate
     tau, temp, T = _drivers(t, rng)
     x, disturbed = _apply(effects, size, u, tau, T, alpha, b, rng, pose)
     x = x + noise * rng.normal(size=x.shape)
-    return SimulatedLog(x, t, temp, intervals, tuple(effects), size, noise, rate, disturbed)
+    return SimulatedEffectsLog(x, t, temp, intervals, tuple(effects), size, noise, rate, disturbed)
 
 
 def simulate_mag_log(
@@ -131,9 +120,9 @@ def simulate_mag_log(
     rate: float = 50.0,
     noise: float = 5e-3,
     seed: int = 0,
-) -> SimulatedLog:
+) -> SimulatedEffectsLog:
     rng = np.random.default_rng(seed)
-    alpha, b = _random_alpha(rng)
+    alpha, b = _random_base(rng)
     if "soft_iron" in effects:
         alpha = alpha + np.diag(size * np.array([3.0, -2.0, 1.0]))
     # smooth random tumble: integrate a slowly varying rotation rate
@@ -154,4 +143,4 @@ def simulate_mag_log(
         tuple(e for e in effects if e != "outliers"), size, v, tau, T, alpha, b, rng, None
     )
     x = x + noise * rng.normal(size=x.shape)
-    return SimulatedLog(x, t, temp, [(0, rest)], tuple(effects), size, noise, rate)
+    return SimulatedEffectsLog(x, t, temp, [(0, rest)], tuple(effects), size, noise, rate)

@@ -8,11 +8,9 @@
 The simulator opens a pseudo-terminal (``os.openpty``, raw mode) and publishes its slave side
 under the symlink ``--link``, which is what the reader opens (as it would open
 ``/dev/ttyACM0``). It then prints one line per sample, like a board on USB serial: the board
-is held in ``--poses`` static poses spread over the sphere (a Fibonacci lattice of gravity
-directions, random heading), joined by hand-held moves. The accelerometer reads
-a' = alpha a + beta + noise (paper 1, eq. 1, parameters from
-:func:`calib_jax.simulate.random_params`), the magnetometer m' = W^-1 m + c + noise (paper 2,
-an ellipsoid from :func:`calib_jax.simulate.random_ellipsoid`).
+is held in ``--poses`` static poses spread over the sphere, joined by hand-held moves, as
+:func:`calib_jax.simulate.simulate_session` simulates them (paper 1's accelerometer, paper 2's
+ellipsoid for the magnetometer).
 
 Time: ``t`` is the board's clock at ``--rate`` Hz; ``--speed`` plays it faster than real time
 (the tests run a 100 Hz board ten times faster).
@@ -48,94 +46,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..simulate import random_ellipsoid, random_params
+from ..simulate import simulate_session
 
 FAULT_REASONS = ("partial", "decode", "too_long", "field_count", "non_numeric")
-
-
-# ---------------------------------------------------------------------------------------------
-# the motion and the readings
-
-
-def fibonacci_directions(n: int) -> np.ndarray:
-    """n unit vectors spread evenly over the sphere (Fibonacci lattice), (n, 3)."""
-    k = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = np.pi * (1.0 + 5**0.5) * k
-    r = np.sqrt(1.0 - z * z)
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-def simulate_session(
-    *,
-    poses: int = 24,
-    hold: float = 1.0,
-    move: float = 0.3,
-    rate: float = 100.0,
-    acc_noise: float = 2e-3,
-    mag_noise: float = 0.2,
-    field: float = 45.0,
-    dip_deg: float = 60.0,
-    hand_motion: float = 0.1,
-    seed: int = 0,
-) -> dict:
-    """Board readings along a pose-and-move path: t (N,), acc (N, 3) in g, mag (N, 3) in uT,
-    pose (N,) (index, -1 while moving) and the truth."""
-    from scipy.spatial.transform import Rotation, Slerp
-
-    rng = np.random.default_rng(seed)
-    params = random_params(rng, gain_spread=0.05, nonorth_spread=0.02, bias_spread=0.05)
-    center, W = random_ellipsoid(rng, radius=field, axis_spread=0.2, center_spread=0.5)
-    dirs = fibonacci_directions(poses)
-    rots = []
-    for d in dirs:
-        # sensor -> world rotation taking the measured 'up' direction d to world +z
-        align, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [d])
-        rots.append(Rotation.from_euler("z", rng.uniform(0, 2 * np.pi)) * align)
-    n_hold, n_move = max(int(round(hold * rate)), 1), max(int(round(move * rate)), 0)
-    R_list, pose, bump = [], [], []
-    for k in range(poses):
-        R_list.append(np.repeat(rots[k].as_matrix()[None], n_hold, axis=0))
-        pose.append(np.full(n_hold, k))
-        bump.append(np.zeros((n_hold, 3)))
-        if k + 1 < poses and n_move:
-            s = np.linspace(0.0, 1.0, n_move + 2)[1:-1]
-            key = Rotation.concatenate([rots[k], rots[k + 1]])
-            R_list.append(Slerp([0.0, 1.0], key)(s).as_matrix())
-            pose.append(np.full(n_move, -1))
-            b = np.sin(np.pi * s)[:, None] * rng.normal(size=3)[None, :]
-            bump.append(b * hand_motion / max(np.abs(b).max(), 1e-12))
-    R = np.concatenate(R_list)  # (N, 3, 3) sensor -> world
-    dip = np.deg2rad(dip_deg)
-    h = field * np.array([0.0, np.cos(dip), -np.sin(dip)])
-    a_true = R[:, 2, :] + np.concatenate(bump)  # R' e_z (+ hand acceleration), in g
-    m_true = np.einsum("nji,j->ni", R, h)  # R' h
-    alpha = np.array(
-        [
-            [params[0], params[3], params[4]],
-            [params[3], params[1], params[5]],
-            [params[4], params[5], params[2]],
-        ]
-    )
-    acc = a_true @ alpha.T + params[6:9] + rng.normal(scale=acc_noise, size=a_true.shape)
-    mag = m_true @ np.linalg.inv(W).T + center + rng.normal(scale=mag_noise, size=m_true.shape)
-    return {
-        "t": np.arange(len(acc)) / rate,
-        "acc": acc,
-        "mag": mag,
-        "pose": np.concatenate(pose),
-        "truth": {
-            "accel_params": params.tolist(),
-            "mag_center": center.tolist(),
-            "mag_soft_iron": W.tolist(),
-            "field": field,
-            "dip_deg": dip_deg,
-            "acc_noise": acc_noise,
-            "mag_noise": mag_noise,
-            "poses": poses,
-            "rate": rate,
-        },
-    }
 
 
 def format_lines(
