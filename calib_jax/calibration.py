@@ -231,6 +231,7 @@ class AccelCalibration:
             "units": {"input": self.input_units, "output": self.output_units, "g": self.g},
             "params": split_params(p),
             "stderr": split_params(s),
+            **linear_forms(forward=np.asarray(p)[ALPHA_INDEX], offset=self.bias),
             "covariance": self.covariance.tolist(),
             "correlation": self.correlation.tolist(),
             "condition": self.condition,
@@ -333,6 +334,25 @@ class AccelCalibration:
     def load(cls, path: str | Path) -> AccelCalibration:
         """Read a saved calibration; a ValueError names the file, the key and the fault."""
         return cls.from_dict(_read_json(path), source=path)
+
+
+def linear_forms(*, offset, forward=None, correction=None) -> dict:
+    """Both forms of a sensor's linear model, as every calibration JSON writes them (one
+    convention for all sensors): ``forward`` maps the true vector to the raw reading,
+    raw = A y + b; ``correction`` maps it back, y = C (raw - b), C = A^-1. Give one matrix;
+    the other is its inverse. Written for other programs to read; the loaders read the
+    parameters they were fitted as (alpha and beta, or the centre and W)."""
+    A = np.linalg.inv(correction) if forward is None else np.asarray(forward, float)
+    C = np.linalg.inv(forward) if correction is None else np.asarray(correction, float)
+    b = np.asarray(offset, float).tolist()
+    return {
+        "forward": {"matrix": A.tolist(), "offset": b, "model": "raw = matrix @ true + offset"},
+        "correction": {
+            "matrix": C.tolist(),
+            "offset": b,
+            "model": "true = matrix @ (raw - offset)",
+        },
+    }
 
 
 def split_params(p: np.ndarray) -> dict:
@@ -786,6 +806,7 @@ class MagCalibration:
                 "field": self.field,
                 "center": np.asarray(self.center).tolist(),
                 "soft_iron": np.asarray(self.soft_iron).tolist(),
+                **linear_forms(correction=self.soft_iron, offset=self.center),
                 "radius": self.radius,
                 "status": self.status,
                 "rms_before_pct": self.rms_before_pct,

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .models.accel import PARAM_NAMES
+from .models.layout import ALPHA_INDEX
 
 
 def paper48_directions() -> np.ndarray:
@@ -92,8 +93,7 @@ def alpha_beta(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     the reading is a' = alpha a + beta (numpy; :func:`calib_jax.models.accel.alpha_matrix` is
     the JAX one)."""
     p = np.asarray(params, float)
-    alpha = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
-    return alpha, p[6:9]
+    return p[ALPHA_INDEX], p[6:9]
 
 
 def _slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:

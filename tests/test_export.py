@@ -291,3 +291,23 @@ def _write_mag(tmp_path):
     p = tmp_path / "mag.json"
     _mag_cal().save(p)
     return p
+
+
+@pytest.mark.parametrize("make", [_accel_cal, _mag_cal], ids=["accel", "mag"])
+def test_every_json_writes_both_linear_forms(make, tmp_path):
+    """Issue 14: one convention in every calibration JSON: 'correction' (true = C (raw - b))
+    and 'forward' (raw = A true + b). Applied by hand to raw readings, the correction gives
+    what the calibration's own apply gives (to round-off, 1e-12 relative), the forward form
+    undoes it, and A C = I; the file loads back equal (the blocks are derived, not read)."""
+    cal = make()
+    d = cal.to_dict()
+    C, A = np.array(d["correction"]["matrix"]), np.array(d["forward"]["matrix"])
+    b = np.array(d["correction"]["offset"])
+    assert d["forward"]["offset"] == d["correction"]["offset"]
+    np.testing.assert_allclose(A @ C, np.eye(3), atol=1e-12)
+    raw = np.random.default_rng(0).normal(size=(50, 3)) * 30 + b
+    true = (raw - b) @ C.T
+    np.testing.assert_allclose(true, cal.apply(raw), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(true @ A.T + b, raw, rtol=1e-12)
+    cal.save(tmp_path / "cal.json")
+    assert type(cal).load(tmp_path / "cal.json") == cal
