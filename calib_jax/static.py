@@ -36,14 +36,17 @@ The moving variance of a short window hides a slow motion under the noise (two p
 tens of degrees apart joined by a 2 s motion change the reading by less than the noise from one
 sample to the next), so the chosen setting's runs can reach past the trim into a motion, or
 span two poses. Each run is therefore tested as a whole, where all of its samples give the
-reference mean: for a ramp starting in its last (or first) window plus trim of samples (a
-constant, then a straight line: the start of a motion), and for a change of mean inside it
-(two poses joined by a quiet motion). The most significant (F statistic beyond ``RAMP_F``, or
-beyond ``RAMP_MEDIAN`` times the median over the runs when the noise is not white) is cut off
-or split at, and the pieces are tested again. A change of mean splits a run only when the two
-means lie ``SPLIT`` of the radius apart: a slow drift within one pose does not split it. Only
-the chosen setting is refined (the sweep scores the raw runs), and an explicit ``trim`` turns
-it off.
+reference mean: for a ramp starting in its last (or first) window plus twice the trim of
+samples (a constant, then a straight line: the start of a motion), and for a change of mean
+inside it (two poses joined by a quiet motion). The most significant (F statistic beyond
+``RAMP_F``, or beyond ``RAMP_MEDIAN`` times the median over the runs when the noise is not
+white) is cut off or split at, and the pieces are tested again. The runs are tested before
+their trim, which is then applied to the pieces: the test sees all of a motion's start that
+passed the threshold (the few samples of it a trimmed run keeps are too few to tell from
+noise), and the trim stays as a margin, since a cut falls a sample or two into the motion as
+often as before it. A change of mean splits a run only when the two means lie ``SPLIT`` of
+the radius apart: a slow drift within one pose does not split it. Only the chosen setting is
+refined (the sweep scores the raw runs), and an explicit ``trim`` turns it off.
 
 Explicit ``window``, ``threshold_factor``, ``threshold``, ``min_duration`` / ``min_samples``
 and ``trim`` fix their dimension of the sweep; the rest is still chosen.
@@ -438,14 +441,23 @@ def _trimmed(
     quarter of the run). An end where the run stops at an invalid sample (a NaN row inside a
     pose) is not a motion edge: it is not trimmed, and such a run needs half the length.
     Returns the kept [a, b) and which of them continue a run cut by an invalid sample."""
+    a, b, cut, trim_a, trim_b = _kept_runs(starts, stops, min_run, trim, valid)
+    return a + trim_a, b - trim_b, cut
+
+
+def _kept_runs(
+    starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The runs ``_trimmed`` keeps, untrimmed, and the trim due at each end: (a, b, cut,
+    trim_a, trim_b)."""
     n = len(valid)
     left_bad = (starts > 0) & ~valid[np.maximum(starts - 1, 0)]
     right_bad = (stops < n) & ~valid[np.minimum(stops, n - 1)]
     need = np.where(left_bad | right_bad, max(1, min_run // 2), min_run)
-    a = starts + np.where(left_bad, 0, trim)
-    b = stops - np.where(right_bad, 0, trim)
-    keep = (stops - starts >= need) & (b - a >= max(2, min_run // 4))
-    return a[keep], b[keep], left_bad[keep]
+    trim_a = np.where(left_bad, 0, trim)
+    trim_b = np.where(right_bad, 0, trim)
+    keep = (stops - starts >= need) & (stops - starts - trim_a - trim_b >= max(2, min_run // 4))
+    return starts[keep], stops[keep], left_bad[keep], trim_a[keep], trim_b[keep]
 
 
 def _ramp_end(yc: np.ndarray, ss: float, span: int) -> tuple[float, int]:
@@ -486,40 +498,61 @@ def _step(yc: np.ndarray, ss: float) -> tuple[float, int]:
 
 
 def _refined(
-    x: np.ndarray, a: np.ndarray, b: np.ndarray, cut: np.ndarray, span: int, min_len: int
+    x: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    cut: np.ndarray,
+    trim_a: np.ndarray,
+    trim_b: np.ndarray,
+    span: int,
+    min_len: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Runs with the slow starts and ends of motions cut off, and runs holding two poses split
-    (module docstring). Each run is tested for a ramp at either end (the last or first
-    ``span`` samples) and for a change of mean inside; the most significant, if beyond
-    ``RAMP_F`` (or ``RAMP_MEDIAN`` times the median over the runs: correlated noise), is
-    applied and the pieces tested again. A change of mean splits a run only when the two
-    means lie ``SPLIT`` of the radius apart (two poses): a slow drift of one pose does not
-    split it. Pieces shorter than ``min_len`` are dropped."""
+    (module docstring).
+
+    The runs come untrimmed, with the trim due at each end (``trim_a``, ``trim_b``), and are
+    tested before it is applied: the ramp test then sees the whole start of a motion that the
+    moving variance let through, not only the few samples the trim left of it, and finds where
+    it starts. The trim is applied to the pieces the tests leave, at cut ends too: a cut is as
+    likely to fall a sample or two into the motion as before it.
+
+    Each run is tested for a ramp at either end (the last or first ``span`` samples of the
+    trimmed run, and the trim beyond) and for a change of mean inside; the most significant, if
+    beyond ``RAMP_F`` (or ``RAMP_MEDIAN`` times the median over the trimmed runs: correlated
+    noise), is applied and the pieces tested again. A change of mean splits a run only when the
+    two means lie ``SPLIT`` of the radius apart (two poses): a slow drift of one pose does not
+    split it. Pieces shorter than ``min_len`` (after the trim) are dropped; pieces shorter than
+    6 samples are kept untested."""
     if len(a) == 0:
         return a, b, cut
+    trimmed = list(zip((a + trim_a).tolist(), (b - trim_b).tolist(), strict=True))
     stats = []
-    for s, e in zip(a, b, strict=True):
+    for s, e in trimmed:
         y = x[s:e]
         yc = y - y.mean(axis=0)
         ss = float(np.sum(yc * yc))
         stats.append(max(_ramp_end(yc, ss, span)[0], _ramp_end(yc[::-1], ss, span)[0]))
     thr = max(RAMP_F, RAMP_MEDIAN * float(np.median(stats)))
-    means = np.array([x[s:e].mean(axis=0) for s, e in zip(a, b, strict=True)])
+    means = np.array([x[s:e].mean(axis=0) for s, e in trimmed])
     radius = float(np.median(np.linalg.norm(means - means.mean(axis=0), axis=1)))
+    # an untrimmed run reaches up to a trim further into the motion
+    reach = span + int(max(trim_a.max(), trim_b.max()))
     out_a, out_b, out_c = [], [], []
-    todo = list(zip(a.tolist(), b.tolist(), cut.tolist(), strict=True))
+    todo = list(
+        zip(a.tolist(), b.tolist(), cut.tolist(), trim_a.tolist(), trim_b.tolist(), strict=True)
+    )
     while todo:
-        s, e, c = todo.pop()
-        if e - s < min_len:
+        s, e, c, ta, tb = todo.pop()
+        if e - s - ta - tb < min_len:
             continue
-        if e - s < 6:
-            out_a.append(s), out_b.append(e), out_c.append(c)
+        if e - s - ta - tb < 6:
+            out_a.append(s + ta), out_b.append(e - tb), out_c.append(c)
             continue
         y = x[s:e]
         yc = y - y.mean(axis=0)
         ss = float(np.sum(yc * yc))
-        f_end, t_end = _ramp_end(yc, ss, span)
-        f_start, t_start = _ramp_end(yc[::-1], ss, span)
+        f_end, t_end = _ramp_end(yc, ss, reach)
+        f_start, t_start = _ramp_end(yc[::-1], ss, reach)
         f_step, k = _step(yc, ss)
         if f_step > thr:
             d = np.linalg.norm(y[:k].mean(axis=0) - y[k:].mean(axis=0))
@@ -527,13 +560,13 @@ def _refined(
                 f_step = 0.0
         best = max(f_end, f_start, f_step)
         if best <= thr:
-            out_a.append(s), out_b.append(e), out_c.append(c)
+            out_a.append(s + ta), out_b.append(e - tb), out_c.append(c)
         elif best == f_step:
-            todo += [(s, s + k, c), (s + k, e, False)]
+            todo += [(s, s + k, c, ta, 0), (s + k, e, False, 0, tb)]
         elif best == f_end:
-            todo.append((s, s + t_end, c))
+            todo.append((s, s + t_end, c, ta, tb))
         else:
-            todo.append((e - t_start, e, c))
+            todo.append((e - t_start, e, c, ta, tb))
     order = np.argsort(out_a)
     return (
         np.asarray(out_a, np.int64)[order],
@@ -877,9 +910,15 @@ def detect_static(
     def run(w: int, f: float | None, mv: np.ndarray, noise: float, refine: bool = False):
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
         starts, stops = _runs(mv <= thr if all_valid else (mv <= thr) & valid)
-        a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
         if refine:
-            a, b, cut = _refined(x, a, b, cut, w + trim_for(w), max(2, min_run_for(w) // 4))
+            a, b, cut, trim_a, trim_b = _kept_runs(
+                starts, stops, min_run_for(w), trim_for(w), valid
+            )
+            a, b, cut = _refined(
+                x, a, b, cut, trim_a, trim_b, w + trim_for(w), max(2, min_run_for(w) // 4)
+            )
+        else:
+            a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
         return float(thr), a, b, cut
 
     single = len(windows) * len(factors) == 1
