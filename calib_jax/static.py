@@ -516,7 +516,8 @@ def _refined(
     tested before it is applied: the ramp test then sees the whole start of a motion that the
     moving variance let through, not only the few samples the trim left of it, and finds where
     it starts. The trim is applied to the pieces the tests leave, at cut ends too: a cut is as
-    likely to fall a sample or two into the motion as before it.
+    likely to fall a sample or two into the motion as before it; and at both ends of a split,
+    which lies inside the motion joining two poses (its ends are then cut at their ramps).
 
     Each run is tested for a ramp at either end (the last or first ``span`` samples of the
     trimmed run, and the trim beyond) and for a change of mean inside; the most significant, if
@@ -537,8 +538,9 @@ def _refined(
     thr = max(RAMP_F, RAMP_MEDIAN * float(np.median(stats)))
     means = np.array([x[s:e].mean(axis=0) for s, e in trimmed])
     radius = float(np.median(np.linalg.norm(means - means.mean(axis=0), axis=1)))
-    # an untrimmed run reaches up to a trim further into the motion
-    reach = span + int(max(trim_a.max(), trim_b.max()))
+    # the trim at a motion edge; an untrimmed run reaches up to this further into the motion
+    edge_trim = int(max(trim_a.max(), trim_b.max()))
+    reach = span + edge_trim
     out_a, out_b, out_c = [], [], []
     todo = list(
         zip(a.tolist(), b.tolist(), cut.tolist(), trim_a.tolist(), trim_b.tolist(), strict=True)
@@ -564,7 +566,7 @@ def _refined(
         if best <= thr:
             out_a.append(s + ta), out_b.append(e - tb), out_c.append(c)
         elif best == f_step:
-            todo += [(s, s + k, c, ta, 0), (s + k, e, False, 0, tb)]
+            todo += [(s, s + k, c, ta, edge_trim), (s + k, e, False, edge_trim, tb)]
         elif best == f_end:
             todo.append((s, s + t_end, c, ta, tb))
         else:
