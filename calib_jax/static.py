@@ -7,7 +7,7 @@ One setting (window w, threshold factor f): the variance of each axis over a cen
 w samples, summed over the axes, is compared with f times the noise level (the 10th percentile
 of that moving variance: any calibration log spends well over 10 % of its time at rest). Runs of
 static samples at least ``min_samples`` long are kept, and each run loses ``trim`` samples at
-both ends (default half a window, at least 0.05 s) so that the slow start and end
+both ends (default half a window, at least 0.1 s) so that the slow start and end
 of a hand motion, quiet enough to pass the threshold, do not leak into the interval means.
 
 No one setting suits every log: a 1 s window merges 0.5 s poses into the motion around them, a
@@ -77,8 +77,10 @@ FACTOR_GRID = (1.5, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0, 20.0, 30.0, 50.0, 80.0, 150.0
 # at most 1000 samples)
 N_WINDOWS = 8
 MIN_WINDOW_S = 0.05
-# least trim at each end of a run, with a rate (s)
-MIN_TRIM_S = 0.05
+# least trim at each end of a run, with a rate (s): a slow hand motion starts by less than the
+# noise per sample (a 20-degree turn over 2 s at 20 Hz: 9 mg a sample against 10 mg), and no
+# test tells its first one or two samples from the pose; 0.1 s is two samples at 20 Hz
+MIN_TRIM_S = 0.1
 # shortest run kept by the sweep when the rate is known (s); else one window
 MIN_RUN_S = 0.25
 # scoring
@@ -87,8 +89,6 @@ N_PARAMS = 9
 # means further than this many robust standard deviations off the fitted ellipsoid are pauses
 # inside a motion (gravity plus the hand's acceleration), not poses
 OFF_SPHERE = 8.0
-# the chosen setting's pauses are found by a fit that starts from this fraction of its means
-ROBUST_CORE = 0.75
 # scores closer than this (relative) are statistically the same: the dof-corrected rms of
 # n - 9 residuals scatters by 1 / sqrt(2 (n - 9)), 10 % at n = 60
 SCORE_TIE = 0.1
@@ -614,20 +614,16 @@ def _radial(u: np.ndarray, M: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
 
 
-def _ellipsoid_residuals(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Radial residuals of an algebraic ellipsoid fit to u (n, 3), and the centre; None if
-    the fit has no ellipsoid."""
-    fit = _ellipsoid(u)
-    return None if fit is None else (_radial(u, *fit), fit[1])
-
-
 def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
     """(rms_dof, n_poses, off) of an algebraic ellipsoid fit to interval means.
 
     ``off`` marks means more than ``OFF_SPHERE`` robust standard deviations (1.4826 MAD) off
     the fitted ellipsoid: quasi-static pauses inside a motion, where the hand's acceleration
-    adds to gravity. The fit is repeated without them, and rms_dof and n_poses are those of
-    the rest. rms_dof is NaN when no fit is possible (fewer than 10 means, or no ellipsoid).
+    adds to gravity. The fit is repeated without them, and the test with it, until the means
+    off stop changing (a pause pulls the fit towards itself and widens the MAD, and can hide
+    another: with 0.5 s poses and 2 s motions at 20 Hz, 10 mg, one pass left four of five
+    pauses in). rms_dof and n_poses are those of the rest; rms_dof is NaN when no fit is
+    possible (fewer than 10 means, or no ellipsoid).
     """
     m = np.asarray(means, float)
     n = len(m)
@@ -639,66 +635,25 @@ def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
     if not np.isfinite(s) or s <= 0:
         return float("nan"), 0, off
     u = (m - m0) / s
-    fit = _ellipsoid_residuals(u)
+    fit = _ellipsoid(u)
     if fit is None:
         return float("nan"), 0, off
-    r, c = fit
-    sigma = 1.4826 * np.median(np.abs(r - np.median(r)))
-    off = np.abs(r - np.median(r)) > OFF_SPHERE * sigma
-    if off.any() and (~off).sum() > N_PARAMS:
-        fit = _ellipsoid_residuals(u[~off])
+    for _ in range(10):  # a handful of passes at most; ten bounds a cycle
+        r = _radial(u, *fit)
+        med = np.median(r[~off])
+        sigma = 1.4826 * np.median(np.abs(r[~off] - med))
+        new = np.abs(r - med) > OFF_SPHERE * sigma
+        if (~new).sum() <= N_PARAMS:
+            new[:] = False
+        if np.array_equal(new, off):
+            break
+        off = new
+        fit = _ellipsoid(u[~off])
         if fit is None:
             return float("nan"), 0, off
-        r, c = fit
-        u = u[~off]
-    elif off.any():
-        off[:] = False
-    rms = float(np.sqrt(np.sum(r * r) / (len(u) - N_PARAMS)))
-    return rms, _count_directions(u - c), off
-
-
-def off_ellipsoid(means: np.ndarray) -> np.ndarray:
-    """Means more than ``OFF_SPHERE`` robust standard deviations off the ellipsoid through the
-    others (pauses inside a motion), by a fit that the pauses do not pull.
-
-    The one-pass test of :func:`ellipsoid_score` fits all the means, pauses included: a few
-    pauses pull the fit and widen the residuals' MAD enough to hide one another (0.5 s poses,
-    2 s motions at 20 Hz: five pauses 0.08-0.15 radii off among 65 means, fitted with residuals
-    of 0.05-0.11 against 8 MADs of 0.088; one was left out). Here
-    the fit starts from the ``ROBUST_CORE`` of the means closest to the fit through all, and is
-    repeated without the means off it until they stop changing. Only the chosen setting's means
-    are tested so: in the sweep's score, a strict setting whose means are mostly fragments of a
-    few poses would leave out the rest and score best (1 s poses, 0.5 s motions at 20 Hz: 13
-    poses found of 60).
-    """
-    m = np.asarray(means, float)
-    n = len(m)
-    off = np.zeros(n, bool)
-    if n <= N_PARAMS + 2:
-        return off
-    m0 = m.mean(axis=0)
-    s = float(np.sqrt(np.mean(np.sum((m - m0) ** 2, axis=1))))
-    fit = _ellipsoid((m - m0) / s) if np.isfinite(s) and s > 0 else None
-    if fit is None:
-        return off
-    u = (m - m0) / s
-    r = _radial(u, *fit)
-    kept = np.zeros(n, bool)
-    kept[np.argsort(np.abs(r - np.median(r)))[: max(int(ROBUST_CORE * n), N_PARAMS + 2)]] = True
-    for _ in range(10):
-        fit = _ellipsoid(u[kept])
-        if fit is None:
-            return off
-        r = _radial(u, *fit)
-        med = np.median(r[kept])
-        sigma = 1.4826 * np.median(np.abs(r[kept] - med))
-        new = np.abs(r - med) > OFF_SPHERE * sigma
-        if (~new).sum() <= N_PARAMS + 2:
-            return off
-        if np.array_equal(new, off) and np.array_equal(~new, kept):
-            break
-        off, kept = new, ~new
-    return off
+    r = _radial(u[~off], *fit)
+    rms = float(np.sqrt(np.sum(r * r) / (len(r) - N_PARAMS)))
+    return rms, _count_directions(u[~off] - fit[1]), off
 
 
 def _count_directions(d: np.ndarray, min_angle_deg: float = 10.0) -> int:
@@ -1056,7 +1011,7 @@ def detect_static(
     thr, a, b, _ = run(w, f, mv, noise, refine=trim is None)
     rejected: list[tuple[int, int]] = []
     if how == "sweep":  # leave out the pauses in motion, off the ellipsoid through the poses
-        off = off_ellipsoid((c1[b] - c1[a]) / (b - a)[:, None] + mu)
+        _, _, off = ellipsoid_score((c1[b] - c1[a]) / (b - a)[:, None] + mu)
         rejected = [(int(s), int(e)) for s, e in zip(a[off], b[off], strict=True)]
         a, b = a[~off], b[~off]
     intervals = []
