@@ -7,7 +7,7 @@ One setting (window w, threshold factor f): the variance of each axis over a cen
 w samples, summed over the axes, is compared with f times the noise level (the 10th percentile
 of that moving variance: any calibration log spends well over 10 % of its time at rest). Runs of
 static samples at least ``min_samples`` long are kept, and each run loses ``trim`` samples at
-both ends (default half a window, at least 0.05 s) so that the slow start and end
+both ends (default half a window, at least 0.1 s) so that the slow start and end
 of a hand motion, quiet enough to pass the threshold, do not leak into the interval means.
 
 No one setting suits every log: a 1 s window merges 0.5 s poses into the motion around them, a
@@ -36,14 +36,17 @@ The moving variance of a short window hides a slow motion under the noise (two p
 tens of degrees apart joined by a 2 s motion change the reading by less than the noise from one
 sample to the next), so the chosen setting's runs can reach past the trim into a motion, or
 span two poses. Each run is therefore tested as a whole, where all of its samples give the
-reference mean: for a ramp starting in its last (or first) window plus trim of samples (a
-constant, then a straight line: the start of a motion), and for a change of mean inside it
-(two poses joined by a quiet motion). The most significant (F statistic beyond ``RAMP_F``, or
-beyond ``RAMP_MEDIAN`` times the median over the runs when the noise is not white) is cut off
-or split at, and the pieces are tested again. A change of mean splits a run only when the two
-means lie ``SPLIT`` of the radius apart: a slow drift within one pose does not split it. Only
-the chosen setting is refined (the sweep scores the raw runs), and an explicit ``trim`` turns
-it off.
+reference mean: for a ramp starting in its last (or first) window plus twice the trim of
+samples (a constant, then a straight line: the start of a motion), and for a change of mean
+inside it (two poses joined by a quiet motion). The most significant (F statistic beyond
+``RAMP_F``, or beyond ``RAMP_MEDIAN`` times the median over the runs when the noise is not
+white) is cut off or split at, and the pieces are tested again. The runs are tested before
+their trim, which is then applied to the pieces: the test sees all of a motion's start that
+passed the threshold (the few samples of it a trimmed run keeps are too few to tell from
+noise), and the trim stays as a margin, since a cut falls a sample or two into the motion as
+often as before it. A change of mean splits a run only when the two means lie ``SPLIT`` of
+the radius apart: a slow drift within one pose does not split it. Only the chosen setting is
+refined (the sweep scores the raw runs), and an explicit ``trim`` turns it off.
 
 Explicit ``window``, ``threshold_factor``, ``threshold``, ``min_duration`` / ``min_samples``
 and ``trim`` fix their dimension of the sweep; the rest is still chosen.
@@ -74,8 +77,10 @@ FACTOR_GRID = (1.5, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0, 20.0, 30.0, 50.0, 80.0, 150.0
 # at most 1000 samples)
 N_WINDOWS = 8
 MIN_WINDOW_S = 0.05
-# least trim at each end of a run, with a rate (s)
-MIN_TRIM_S = 0.05
+# least trim at each end of a run, with a rate (s): a slow hand motion starts by less than the
+# noise per sample (a 20-degree turn over 2 s at 20 Hz: 9 mg a sample against 10 mg), and no
+# test tells its first one or two samples from the pose; 0.1 s is two samples at 20 Hz
+MIN_TRIM_S = 0.1
 # shortest run kept by the sweep when the rate is known (s); else one window
 MIN_RUN_S = 0.25
 # scoring
@@ -438,14 +443,23 @@ def _trimmed(
     quarter of the run). An end where the run stops at an invalid sample (a NaN row inside a
     pose) is not a motion edge: it is not trimmed, and such a run needs half the length.
     Returns the kept [a, b) and which of them continue a run cut by an invalid sample."""
+    a, b, cut, trim_a, trim_b = _kept_runs(starts, stops, min_run, trim, valid)
+    return a + trim_a, b - trim_b, cut
+
+
+def _kept_runs(
+    starts: np.ndarray, stops: np.ndarray, min_run: int, trim: int, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The runs ``_trimmed`` keeps, untrimmed, and the trim due at each end: (a, b, cut,
+    trim_a, trim_b)."""
     n = len(valid)
     left_bad = (starts > 0) & ~valid[np.maximum(starts - 1, 0)]
     right_bad = (stops < n) & ~valid[np.minimum(stops, n - 1)]
     need = np.where(left_bad | right_bad, max(1, min_run // 2), min_run)
-    a = starts + np.where(left_bad, 0, trim)
-    b = stops - np.where(right_bad, 0, trim)
-    keep = (stops - starts >= need) & (b - a >= max(2, min_run // 4))
-    return a[keep], b[keep], left_bad[keep]
+    trim_a = np.where(left_bad, 0, trim)
+    trim_b = np.where(right_bad, 0, trim)
+    keep = (stops - starts >= need) & (stops - starts - trim_a - trim_b >= max(2, min_run // 4))
+    return starts[keep], stops[keep], left_bad[keep], trim_a[keep], trim_b[keep]
 
 
 def _ramp_end(yc: np.ndarray, ss: float, span: int) -> tuple[float, int]:
@@ -486,40 +500,63 @@ def _step(yc: np.ndarray, ss: float) -> tuple[float, int]:
 
 
 def _refined(
-    x: np.ndarray, a: np.ndarray, b: np.ndarray, cut: np.ndarray, span: int, min_len: int
+    x: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    cut: np.ndarray,
+    trim_a: np.ndarray,
+    trim_b: np.ndarray,
+    span: int,
+    min_len: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Runs with the slow starts and ends of motions cut off, and runs holding two poses split
-    (module docstring). Each run is tested for a ramp at either end (the last or first
-    ``span`` samples) and for a change of mean inside; the most significant, if beyond
-    ``RAMP_F`` (or ``RAMP_MEDIAN`` times the median over the runs: correlated noise), is
-    applied and the pieces tested again. A change of mean splits a run only when the two
-    means lie ``SPLIT`` of the radius apart (two poses): a slow drift of one pose does not
-    split it. Pieces shorter than ``min_len`` are dropped."""
+    (module docstring).
+
+    The runs come untrimmed, with the trim due at each end (``trim_a``, ``trim_b``), and are
+    tested before it is applied: the ramp test then sees the whole start of a motion that the
+    moving variance let through, not only the few samples the trim left of it, and finds where
+    it starts. The trim is applied to the pieces the tests leave, at cut ends too: a cut is as
+    likely to fall a sample or two into the motion as before it; and at both ends of a split,
+    which lies inside the motion joining two poses (its ends are then cut at their ramps).
+
+    Each run is tested for a ramp at either end (the last or first ``span`` samples of the
+    trimmed run, and the trim beyond) and for a change of mean inside; the most significant, if
+    beyond ``RAMP_F`` (or ``RAMP_MEDIAN`` times the median over the trimmed runs: correlated
+    noise), is applied and the pieces tested again. A change of mean splits a run only when the
+    two means lie ``SPLIT`` of the radius apart (two poses): a slow drift of one pose does not
+    split it. Pieces shorter than ``min_len`` (after the trim) are dropped; pieces shorter than
+    6 samples are kept untested."""
     if len(a) == 0:
         return a, b, cut
+    trimmed = list(zip((a + trim_a).tolist(), (b - trim_b).tolist(), strict=True))
     stats = []
-    for s, e in zip(a, b, strict=True):
+    for s, e in trimmed:
         y = x[s:e]
         yc = y - y.mean(axis=0)
         ss = float(np.sum(yc * yc))
         stats.append(max(_ramp_end(yc, ss, span)[0], _ramp_end(yc[::-1], ss, span)[0]))
     thr = max(RAMP_F, RAMP_MEDIAN * float(np.median(stats)))
-    means = np.array([x[s:e].mean(axis=0) for s, e in zip(a, b, strict=True)])
+    means = np.array([x[s:e].mean(axis=0) for s, e in trimmed])
     radius = float(np.median(np.linalg.norm(means - means.mean(axis=0), axis=1)))
+    # the trim at a motion edge; an untrimmed run reaches up to this further into the motion
+    edge_trim = int(max(trim_a.max(), trim_b.max()))
+    reach = span + edge_trim
     out_a, out_b, out_c = [], [], []
-    todo = list(zip(a.tolist(), b.tolist(), cut.tolist(), strict=True))
+    todo = list(
+        zip(a.tolist(), b.tolist(), cut.tolist(), trim_a.tolist(), trim_b.tolist(), strict=True)
+    )
     while todo:
-        s, e, c = todo.pop()
-        if e - s < min_len:
+        s, e, c, ta, tb = todo.pop()
+        if e - s - ta - tb < min_len:
             continue
-        if e - s < 6:
-            out_a.append(s), out_b.append(e), out_c.append(c)
+        if e - s - ta - tb < 6:
+            out_a.append(s + ta), out_b.append(e - tb), out_c.append(c)
             continue
         y = x[s:e]
         yc = y - y.mean(axis=0)
         ss = float(np.sum(yc * yc))
-        f_end, t_end = _ramp_end(yc, ss, span)
-        f_start, t_start = _ramp_end(yc[::-1], ss, span)
+        f_end, t_end = _ramp_end(yc, ss, reach)
+        f_start, t_start = _ramp_end(yc[::-1], ss, reach)
         f_step, k = _step(yc, ss)
         if f_step > thr:
             d = np.linalg.norm(y[:k].mean(axis=0) - y[k:].mean(axis=0))
@@ -527,13 +564,13 @@ def _refined(
                 f_step = 0.0
         best = max(f_end, f_start, f_step)
         if best <= thr:
-            out_a.append(s), out_b.append(e), out_c.append(c)
+            out_a.append(s + ta), out_b.append(e - tb), out_c.append(c)
         elif best == f_step:
-            todo += [(s, s + k, c), (s + k, e, False)]
+            todo += [(s, s + k, c, ta, edge_trim), (s + k, e, False, edge_trim, tb)]
         elif best == f_end:
-            todo.append((s, s + t_end, c))
+            todo.append((s, s + t_end, c, ta, tb))
         else:
-            todo.append((e - t_start, e, c))
+            todo.append((e - t_start, e, c, ta, tb))
     order = np.argsort(out_a)
     return (
         np.asarray(out_a, np.int64)[order],
@@ -554,9 +591,9 @@ def _fibonacci_sphere(n: int = 412) -> np.ndarray:
 _CELLS = _fibonacci_sphere()
 
 
-def _ellipsoid_residuals(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Radial residuals of an algebraic ellipsoid fit to u (n, 3), and the centre; None if
-    the fit has no ellipsoid."""
+def _ellipsoid(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(M, c) of an algebraic ellipsoid fit to u (n, 3), (u - c)' M (u - c) = 1; None if the
+    fit has no ellipsoid."""
     x, y, z = u.T
     D = np.stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z], 1)
     v, *_ = np.linalg.lstsq(D, np.ones(len(u)), rcond=None)
@@ -568,9 +605,13 @@ def _ellipsoid_residuals(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     M = A / (1.0 + c @ A @ c)
     if not np.all(np.isfinite(M)) or np.linalg.eigvalsh(M)[0] <= 0:
         return None
+    return M, c
+
+
+def _radial(u: np.ndarray, M: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Radial residuals of the points u (n, 3) off the ellipsoid (M, c), in radii."""
     d = u - c
-    q = np.einsum("ni,ij,nj->n", d, M, d)
-    return np.sqrt(np.maximum(q, 0.0)) - 1.0, c
+    return np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
 
 
 def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
@@ -578,8 +619,11 @@ def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
 
     ``off`` marks means more than ``OFF_SPHERE`` robust standard deviations (1.4826 MAD) off
     the fitted ellipsoid: quasi-static pauses inside a motion, where the hand's acceleration
-    adds to gravity. The fit is repeated without them, and rms_dof and n_poses are those of
-    the rest. rms_dof is NaN when no fit is possible (fewer than 10 means, or no ellipsoid).
+    adds to gravity. The fit is repeated without them, and the test with it, until the means
+    off stop changing (a pause pulls the fit towards itself and widens the MAD, and can hide
+    another: with 0.5 s poses and 2 s motions at 20 Hz, 10 mg, one pass left four of five
+    pauses in). rms_dof and n_poses are those of the rest; rms_dof is NaN when no fit is
+    possible (fewer than 10 means, or no ellipsoid).
     """
     m = np.asarray(means, float)
     n = len(m)
@@ -591,22 +635,25 @@ def ellipsoid_score(means: np.ndarray) -> tuple[float, int, np.ndarray]:
     if not np.isfinite(s) or s <= 0:
         return float("nan"), 0, off
     u = (m - m0) / s
-    fit = _ellipsoid_residuals(u)
+    fit = _ellipsoid(u)
     if fit is None:
         return float("nan"), 0, off
-    r, c = fit
-    sigma = 1.4826 * np.median(np.abs(r - np.median(r)))
-    off = np.abs(r - np.median(r)) > OFF_SPHERE * sigma
-    if off.any() and (~off).sum() > N_PARAMS:
-        fit = _ellipsoid_residuals(u[~off])
+    for _ in range(10):  # a handful of passes at most; ten bounds a cycle
+        r = _radial(u, *fit)
+        med = np.median(r[~off])
+        sigma = 1.4826 * np.median(np.abs(r[~off] - med))
+        new = np.abs(r - med) > OFF_SPHERE * sigma
+        if (~new).sum() <= N_PARAMS:
+            new[:] = False
+        if np.array_equal(new, off):
+            break
+        off = new
+        fit = _ellipsoid(u[~off])
         if fit is None:
             return float("nan"), 0, off
-        r, c = fit
-        u = u[~off]
-    elif off.any():
-        off[:] = False
-    rms = float(np.sqrt(np.sum(r * r) / (len(u) - N_PARAMS)))
-    return rms, _count_directions(u - c), off
+    r = _radial(u[~off], *fit)
+    rms = float(np.sqrt(np.sum(r * r) / (len(r) - N_PARAMS)))
+    return rms, _count_directions(u[~off] - fit[1]), off
 
 
 def _count_directions(d: np.ndarray, min_angle_deg: float = 10.0) -> int:
@@ -877,9 +924,15 @@ def detect_static(
     def run(w: int, f: float | None, mv: np.ndarray, noise: float, refine: bool = False):
         thr = threshold if f is None else (f * noise if noise > 0 else np.finfo(float).tiny)
         starts, stops = _runs(mv <= thr if all_valid else (mv <= thr) & valid)
-        a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
         if refine:
-            a, b, cut = _refined(x, a, b, cut, w + trim_for(w), max(2, min_run_for(w) // 4))
+            a, b, cut, trim_a, trim_b = _kept_runs(
+                starts, stops, min_run_for(w), trim_for(w), valid
+            )
+            a, b, cut = _refined(
+                x, a, b, cut, trim_a, trim_b, w + trim_for(w), max(2, min_run_for(w) // 4)
+            )
+        else:
+            a, b, cut = _trimmed(starts, stops, min_run_for(w), trim_for(w), valid)
         return float(thr), a, b, cut
 
     single = len(windows) * len(factors) == 1
@@ -957,7 +1010,7 @@ def detect_static(
     # edges: detect_rest, --trim)
     thr, a, b, _ = run(w, f, mv, noise, refine=trim is None)
     rejected: list[tuple[int, int]] = []
-    if how == "sweep":  # leave out the pauses in motion the score found off the ellipsoid
+    if how == "sweep":  # leave out the pauses in motion, off the ellipsoid through the poses
         _, _, off = ellipsoid_score((c1[b] - c1[a]) / (b - a)[:, None] + mu)
         rejected = [(int(s), int(e)) for s, e in zip(a[off], b[off], strict=True)]
         a, b = a[~off], b[~off]

@@ -63,8 +63,8 @@ def test_every_pose_found_without_flags(hold, move, rate, noise, rest):
     assert found == 60 and bad == 0, (found, bad, rep.setting(rate), rep.candidates_table(6))
     assert rep.how == "sweep" and rep.chosen is not None
     assert len(rep.candidates) > 10
-    # the chosen setting's edges are trimmed: half a window, at least 0.05 s
-    assert rep.trim == max(rep.window // 2, round(0.05 * rate))
+    # the chosen setting's edges are trimmed: half a window, at least 0.1 s
+    assert rep.trim == max(rep.window // 2, round(0.1 * rate))
 
 
 def test_without_a_sample_rate_windows_come_from_the_data():
