@@ -37,16 +37,22 @@ def saturated_axes(
     """Axes whose extreme value is held by many samples: (axis, 'max'|'min', value).
 
     A sensor at the end of its range repeats the same extreme reading; ``min_count`` samples
-    (and at least ``min_fraction`` of them) at exactly the maximum or minimum of an axis mark
-    it as clipped. ``x`` holds finite rows only.
+    (and at least ``min_fraction`` of them) at exactly the maximum or minimum of an axis, more
+    than hold the next value inward, mark it as clipped. The last condition is the pile-up a
+    clip makes: a coarsely quantised axis (an MPU-9150 log printed to 0.01 g) repeats its
+    extreme too, but its tail thins out towards the extreme. ``x`` holds finite rows only.
     """
     out = []
     n = len(x)
     for ax in range(3):
-        col = x[:, ax]
-        for kind, v in (("max", col.max()), ("min", col.min())):
-            cnt = int(np.sum(col == v))
-            if cnt >= max(min_count, min_fraction * n):
+        values, counts = np.unique(x[:, ax], return_counts=True)
+        if len(values) < 2:
+            continue  # a constant axis is a stuck sensor, not a clip: screen_samples says so
+        for kind, cnt, inner, v in (
+            ("max", counts[-1], counts[-2], values[-1]),
+            ("min", counts[0], counts[1], values[0]),
+        ):
+            if cnt >= max(min_count, min_fraction * n) and cnt > inner:
                 out.append((ax, kind, float(v)))
     return out
 
@@ -59,6 +65,19 @@ def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, li
     if not finite.any():
         what = "accelerometer" if sensor == "accel" else "magnetometer"
         raise ValueError(f"no finite {what} samples: every row has NaN or inf")
+    what = "accelerometer" if sensor == "accel" else "magnetometer"
+    xf = x[finite]
+    # one axis constant while the others swing (the board moved): that axis is stuck. A
+    # board that never moved, read coarsely, can hold every axis constant: the pose checks
+    # then say "one pose", which is the cause
+    moved = np.ptp(xf, axis=0).max() > 0.1 * np.median(np.linalg.norm(xf, axis=1))
+    for ax in range(3):
+        if moved and np.all(xf[:, ax] == xf[0, ax]):
+            raise ValueError(
+                f"{what} axis {'xyz'[ax]} reads {xf[0, ax]:g} in every sample while the others "
+                "swing: a stuck axis, or a column that is not a reading; check the sensor and "
+                "the column mapping (--columns)"
+            )
     notes = []
     n_bad = int((~finite).sum())
     if n_bad:

@@ -53,7 +53,7 @@ and ``trim`` fix their dimension of the sweep; the rest is still chosen.
 
 Pose tables (one row per pose, already averaged, no time column; Magneto's input format) are
 recognised before any of this: neighbouring rows lie far apart compared with the spread of the
-data, and there are few rows. Each row is then one interval of one sample.
+data, they do not repeat, and there are few rows. Each row is then one interval of one sample.
 
 Host-side numpy; the log is read once: cumulative sums of the centred data give every window's
 moving variance and every interval's mean in O(N).
@@ -110,6 +110,11 @@ POSE_TABLE_MAX_ROWS = 10_000
 POSE_TABLE_STEP = 0.1
 """Rows are poses when their 25th-percentile neighbour distance exceeds this fraction of the
 data's rms radius (a time series at rest has neighbour distances at the noise level)."""
+POSE_TABLE_DISTINCT = 0.5
+"""A pose table's rows are means, which never repeat exactly; a time series read in coarse
+steps does (an MPU-9150 lying still, printed to 0.01 g: 1700 rows, a few dozen distinct,
+neighbour steps of one step against a spread of one step, on a lattice an ellipsoid can pass
+through). At least this fraction of the rows must be distinct."""
 SPHERE_RMS = 0.05
 """Points lie on one ellipsoid when the algebraic ellipsoid fit leaves a dof-corrected radial
 rms below this fraction of its radius (poses: 1e-3 to 1e-2). The noise of one pose fills a
@@ -686,6 +691,8 @@ def looks_like_pose_table(x: np.ndarray) -> bool:
         return False
     step = np.linalg.norm(np.diff(x, axis=0), axis=1)
     if not np.percentile(step, 25) > POSE_TABLE_STEP * spread:
+        return False
+    if len(np.unique(x, axis=0)) < POSE_TABLE_DISTINCT * n:
         return False
     return bool(ellipsoid_score(x)[0] <= SPHERE_RMS)  # NaN (no ellipsoid) is not a table
 

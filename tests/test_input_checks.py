@@ -12,6 +12,7 @@ import time
 import numpy as np
 import pytest
 
+from calib_jax import calibrate_accel
 from calib_jax.calibration import AccelCalibration, MagCalibration, write_json_atomic
 from calib_jax.io.files import SensorLog
 
@@ -445,3 +446,36 @@ def test_pipeline_fit_rejects_a_nonpositive_magnitude():
         np.testing.assert_allclose(np.asarray(c), truth_c, atol=1e-8)
         with pytest.raises(ValueError, match="sensor 1: magnitude must be"):
             pl.fit_batch(fit, jnp.stack([raw, raw]), jnp.asarray([1.0, -1.0]))
+
+
+def test_a_coarse_still_log_is_one_pose_not_a_table_and_not_saturated():
+    """The MPU-9150 log of tests/NOTES (lying flat, printed to 0.01 g, no time column) read as
+    a 1700-row pose table by diagnose (its rows sit on a lattice an ellipsoid passes through)
+    and had its quantised extremes flagged as saturation. Simulated the same way: no
+    saturation note, not a pose table, and calibrate_accel and diagnose_accel both refuse it
+    for having one pose."""
+    from calib_jax.diagnose import diagnose_accel
+    from calib_jax.observations import screen_samples
+    from calib_jax.static import detect_static
+
+    rng = np.random.default_rng(0)
+    x = np.round((np.array([0.0, 0.0, 1.005]) + 0.006 * rng.normal(size=(1700, 3))) / 0.01) * 0.01
+    valid, notes = screen_samples(x, "accel")
+    assert valid.all() and notes == []
+    assert detect_static(x).kind == "log"
+    with pytest.raises(ValueError, match="only 1 distinct poses"):
+        calibrate_accel(x)
+    d = diagnose_accel(x)
+    assert d.verdict == "not_possible" and "only 1 distinct poses" in d.notes[0]
+
+
+def test_a_stuck_axis_is_named():
+    """One axis constant while the board is turned through 30 poses: the error names the axis
+    (it used to read as 'all poses lie near one plane')."""
+    from calib_jax.simulate import random_directions, random_params, simulate_accel
+
+    s = simulate_accel(random_params(1), random_directions(30, 1), noise=2e-3, rng=1)
+    raw = s.raw.copy()
+    raw[:, 1] = 0.25
+    with pytest.raises(ValueError, match="axis y reads 0.25 in every sample while the others"):
+        calibrate_accel(raw, sample_rate=s.sample_rate)

@@ -38,7 +38,8 @@ from scipy import stats
 
 from ..io.files import SensorLog
 from ..lm import is_converged
-from ..static import detect_rest, detect_static
+from ..observations import accel_observations, screen_samples
+from ..static import detect_rest
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
 
@@ -931,18 +932,26 @@ def diagnose_accel(
     if t is None:
         t = np.arange(n) / (sample_rate or 1.0)
     t = np.asarray(t, float)
-    ok = np.all(np.isfinite(x), axis=1)
-    det_notes: list[str] = []
+    ok, det_notes = screen_samples(x, "accel")  # the way in of calibrate_accel
     if intervals is not None:
         spans = [(int(a), int(b)) for a, b in intervals if b - a > 1 and ok[a:b].all()]
     elif block:
         spans = [(a, a + block) for a in range(0, n - block + 1, block)]
         spans = [(a, b) for a, b in spans if ok[a:b].all()]
     else:
-        # the same detector and defaults as calibrate_accel (a sweep scored by the fit)
-        rep = detect_static(x, sample_rate=sample_rate, valid=ok, **static_options)
-        spans = [(iv.start, iv.stop) for iv in rep.intervals]
-        det_notes = rep.notes(sample_rate)
+        # calibrate_accel's way in: the same screen, detector (a sweep scored by the fit) and
+        # pose checks, so a log it refuses is not diagnosed either
+        from ..accel import check_poses
+
+        try:
+            found = accel_observations(x, sample_rate=sample_rate, **static_options)
+            check_poses(found, "accel9", sample_rate)
+        except ValueError as exc:
+            d = _not_possible("accel", 0, "9 distinct static poses", str(exc), source)
+            d.notes.extend(det_notes)
+            return d
+        spans = [(iv.start, iv.stop) for iv in found.report.intervals]
+        det_notes += found.report.notes(sample_rate)
     m = len(spans)
     if m < MIN_OBSERVATIONS:
         d = _not_possible(
@@ -1064,7 +1073,7 @@ def diagnose_mag(
     sample_rate = sample_rate or rate
     if model not in ("full", "sphere"):
         raise ValueError(f"model must be 'full' or 'sphere', got {model!r}")
-    ok = np.all(np.isfinite(x), axis=1)
+    ok, screen_notes = screen_samples(x, "mag")  # the way in of calibrate_mag
     n = len(x)
     if t is None:
         t = np.arange(n) / (sample_rate or 1.0)
@@ -1107,6 +1116,7 @@ def diagnose_mag(
         sensor="mag",
         kind=f"samples (every {k})",
     )
+    obs.notes.extend(screen_notes)
     cands = tuple(
         cc
         for cc in candidates
