@@ -65,6 +65,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .sphere import sphere_cells
+
 # classic single setting (kept when no sweep candidate can be scored)
 DEFAULT_FACTOR = 6.0
 DEFAULT_WINDOW_S = 1.0
@@ -584,16 +586,7 @@ def _refined(
     )
 
 
-def _fibonacci_sphere(n: int = 412) -> np.ndarray:
-    """n nearly uniform unit vectors (spacing ~ sqrt(4 pi / n) rad: 10 degrees for 412)."""
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    phi = np.pi * (1 + 5**0.5) * i
-    r = np.sqrt(1 - z * z)
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-_CELLS = _fibonacci_sphere()
+_CELLS = sphere_cells(412)  # spacing ~ sqrt(4 pi / 412) rad: 10 degrees
 
 
 def _ellipsoid(u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
