@@ -74,17 +74,14 @@ def _add_detector_options(p: argparse.ArgumentParser, *, block: bool = True) -> 
 def detector_options(args: argparse.Namespace, sample_rate: float | None) -> dict:
     """The detector keywords of :func:`calib_jax.calibrate_accel` that were given (the rest
     stay automatic). ``--min-static`` is seconds with a sample rate, else samples."""
-    out: dict = {}
-    if getattr(args, "window", None) is not None:
-        out["window"] = args.window
-    if getattr(args, "threshold_factor", None) is not None:
-        out["threshold_factor"] = args.threshold_factor
-    if getattr(args, "min_static", None) is not None:
-        if sample_rate:
-            out["min_duration"] = args.min_static
-        else:
-            out["min_samples"] = int(args.min_static)
-    return out
+    from .observations import detector_keywords
+
+    return detector_keywords(sample_rate=sample_rate, **_detector_args(args))
+
+
+def _detector_args(args: argparse.Namespace) -> dict:
+    """The detector options as given on the command line (None: automatic)."""
+    return {k: getattr(args, k, None) for k in ("window", "threshold_factor", "min_static")}
 
 
 def _accel_detector(args: argparse.Namespace, sample_rate: float | None) -> dict:
@@ -312,6 +309,7 @@ def run_batch(args: argparse.Namespace) -> int:
             chunk=args.chunk,
             columns=args.columns,
             use=args.use,
+            detector=_detector_args(args),
             **options,
         )
     else:
@@ -322,6 +320,7 @@ def run_batch(args: argparse.Namespace) -> int:
             columns=args.columns,
             use=args.use,
             progress=False if args.no_progress else None,
+            detector=_detector_args(args),
             **options,
         )
     from .calibration import FORMAT_VERSION, _sanitize  # the layout of calib_jax.BatchRecord
@@ -605,6 +604,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="accelerometer fit points, as calib-jax accel: static-interval means or samples",
     )
     b.add_argument("--chunk", type=_pos_int, default=256, help="files per batch fit")
+    _add_detector_options(b, block=False)
     b.add_argument(
         "--dask",
         nargs="?",
@@ -672,8 +672,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference magnitude")
     r.add_argument("--field", type=_pos_float, default=None, help="known field magnitude (mag)")
-    r.add_argument("--window", type=_pos_int, default=None, help="moving-variance window (samples)")
-    r.add_argument("--min-static", type=_nonneg_float, default=None, help="shortest pose (s)")
+    _add_detector_options(r, block=False)
     r.add_argument("--solver", default="lm1", choices=_SOLVERS)
     r.set_defaults(func=run_record, output_files=(("out", "--out"),))
 

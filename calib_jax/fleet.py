@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .io.files import SensorLog, load_log
-from .observations import accel_observations, screen_samples
+from .observations import accel_observations, detector_keywords, screen_samples
 from .padding import bucket
 
 SENSORS = ("accel", "mag")
@@ -121,14 +121,22 @@ def fit_prepared(
 
 
 def _fit_chunk(
-    paths: list[str], sensor: str, columns: str | None, options: dict, use: str = "means"
+    paths: list[str],
+    sensor: str,
+    columns: str | None,
+    options: dict,
+    use: str = "means",
+    detector: dict | None = None,
 ) -> list[dict]:
-    """Prepare and fit one chunk of files (also the Dask task)."""
+    """Prepare and fit one chunk of files (also the Dask task); ``detector`` holds the
+    detector options (window, threshold_factor, min_static), converted per log by
+    :func:`calib_jax.observations.detector_keywords`."""
     prepared, out = [], []
     for p in paths:
         try:
             log = load_log(p, columns=columns, sensor=sensor)
-            pts, info = prepare_log(log, sensor, model=options.get("model"), use=use)
+            found = detector_keywords(sample_rate=log.sample_rate, **(detector or {}))
+            pts, info = prepare_log(log, sensor, model=options.get("model"), use=use, **found)
             prepared.append((p, pts, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
             # ValueError/OSError carry a message meant for the user; anything else is a bug in
@@ -177,13 +185,16 @@ def calibrate_files(
     columns: str | None = None,
     use: str = "means",
     progress: bool | None = None,
+    detector: dict | None = None,
     **options,
 ) -> Iterator[dict]:
     """Calibrate many logs chunk by chunk, yielding one result dict per file, in order.
 
     Each log is prepared as :func:`calib_jax.calibrate_accel` / :func:`calib_jax.calibrate_mag`
     would prepare it (:func:`prepare_log`; ``use`` as in ``calibrate_accel``), so a file gets
-    the parameters its single fit gives. ``options`` go to the batch fit (``g``, ``model``,
+    the parameters its single fit gives. ``detector``: the static detector's options for every
+    log (``window``, ``threshold_factor``, ``min_static`` in seconds, or samples for a log
+    without a rate; default automatic). ``options`` go to the batch fit (``g``, ``model``,
     ``solver``, ``field`` ...). Memory holds one chunk. ``progress``: a progress bar counting
     files and failures (:func:`progress_bar`; None: on a terminal or in a notebook only).
     """
@@ -191,7 +202,7 @@ def calibrate_files(
     failed = 0
     with progress_bar(len(paths), progress, f"calibrating {sensor}") as bar:
         for part in _chunks(paths, chunk):
-            for res in _fit_chunk(part, sensor, columns, options, use):
+            for res in _fit_chunk(part, sensor, columns, options, use, detector):
                 failed += res["status"] != "ok"
                 bar.update(1)
                 bar.set_postfix(not_calibrated=failed, refresh=False)
@@ -216,6 +227,7 @@ def calibrate_files_dask(
     chunk: int = 256,
     columns: str | None = None,
     use: str = "means",
+    detector: dict | None = None,
     **options,
 ) -> list[dict]:
     """:func:`calibrate_files` with the chunks spread over a Dask cluster.
@@ -243,7 +255,14 @@ def calibrate_files_dask(
     try:
         parts = list(_chunks(paths, chunk))
         futures = client.map(
-            _fit_chunk, parts, sensor=sensor, columns=columns, options=options, use=use, pure=False
+            _fit_chunk,
+            parts,
+            sensor=sensor,
+            columns=columns,
+            options=options,
+            use=use,
+            detector=detector,
+            pure=False,
         )
         results = client.gather(futures)
     finally:

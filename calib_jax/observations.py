@@ -93,6 +93,29 @@ def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, li
     return valid, notes
 
 
+def detector_keywords(
+    *,
+    window: int | None = None,
+    threshold_factor: float | None = None,
+    min_static: float | None = None,
+    sample_rate: float | None = None,
+) -> dict:
+    """The :func:`calib_jax.static.detect_static` keywords for the detector options every
+    command takes (``--window``, ``--threshold-factor``, ``--min-static``); the ones left None
+    stay automatic. ``min_static`` is seconds with a sample rate, else samples."""
+    out: dict = {}
+    if window is not None:
+        out["window"] = int(window)
+    if threshold_factor is not None:
+        out["threshold_factor"] = float(threshold_factor)
+    if min_static is not None:
+        if sample_rate:
+            out["min_duration"] = float(min_static)
+        else:
+            out["min_samples"] = int(min_static)
+    return out
+
+
 @dataclass
 class AccelObservations:
     """What an accelerometer fit sees of a log."""

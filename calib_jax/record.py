@@ -43,6 +43,7 @@ import numpy as np
 
 from .calibration import BatchRecord, write_json_atomic
 from .io.serial import Batch, SerialReader, log_columns
+from .observations import detector_keywords
 from .static import detect_static, distinct_directions
 
 PAPER1_POSES = 48
@@ -173,6 +174,7 @@ def assess_coverage(
     sample_rate: float | None = None,
     window: int | None = None,
     min_duration: float | None = None,
+    threshold_factor: float | None = None,
     target_poses: int = PAPER1_POSES,
     mag_target: float = MAG_TARGET,
 ) -> Coverage:
@@ -188,9 +190,13 @@ def assess_coverage(
         rep = detect_static(
             x,
             sample_rate=sample_rate,
-            window=window,
-            min_duration=min_duration if sample_rate else None,
             valid=ok,
+            **detector_keywords(
+                window=window,
+                threshold_factor=threshold_factor,
+                min_static=min_duration if sample_rate else None,
+                sample_rate=sample_rate,
+            ),
         )
         means = rep.means()
         centre = _sphere_centre(means)
@@ -311,6 +317,7 @@ def record_session(
     mag_target: float = MAG_TARGET,
     window: int | None = None,
     min_static: float | None = None,
+    threshold_factor: float | None = None,
     progress_interval: float = 1.0,
     echo: Callable[[str], None] | None = _stderr,
     **reader_options,
@@ -330,6 +337,7 @@ def record_session(
     if len(set(ports)) != len(ports):
         raise ValueError(f"a port is given twice: {ports}")
     say = echo or (lambda s: None)
+    detector = {"window": window, "min_static": min_static, "threshold_factor": threshold_factor}
     paths = device_paths(out, len(ports))
     devices = []
     for k, (url, path) in enumerate(zip(ports, paths, strict=True)):
@@ -366,7 +374,7 @@ def record_session(
                 break
             if now >= next_report:
                 next_report = now + progress_interval
-                _assess(devices, sensor, window, min_static, target_poses, mag_target)
+                _assess(devices, sensor, detector, target_poses, mag_target)
                 say(_progress(devices, now - t0))
                 if auto_stop and all(d.coverage is not None and d.coverage.enough for d in devices):
                     reason = "covered"
@@ -380,7 +388,7 @@ def record_session(
                 dev.thread.join(timeout=10.0)
             if dev.thread.is_alive():  # stuck in a driver call: close from here
                 dev.reader.close()
-    _assess(devices, sensor, window, min_static, target_poses, mag_target)
+    _assess(devices, sensor, detector, target_poses, mag_target)
     elapsed = time.monotonic() - t0
     say(_progress(devices, elapsed))
     words = {
@@ -417,7 +425,7 @@ def _seed_from_log(dev: Device, say: Callable[[str], None]) -> None:
     say(f"{dev.path}: {len(lg)} rows from before count towards the coverage")
 
 
-def _assess(devices, sensor, window, min_static, target_poses, mag_target) -> None:
+def _assess(devices, sensor, detector, target_poses, mag_target) -> None:
     for dev in devices:
         b = dev.data()
         dev.coverage = assess_coverage(
@@ -425,8 +433,9 @@ def _assess(devices, sensor, window, min_static, target_poses, mag_target) -> No
             b.mag,
             sensor=sensor,
             sample_rate=_rate(b.t) if len(b) > 1 else None,
-            window=window,
-            min_duration=min_static,
+            window=detector.get("window"),
+            min_duration=detector.get("min_static"),
+            threshold_factor=detector.get("threshold_factor"),
             target_poses=target_poses,
             mag_target=mag_target,
         )
@@ -457,6 +466,7 @@ def calibrate_recording(
     field: float | None = None,
     window: int | None = None,
     min_static: float | None = None,
+    threshold_factor: float | None = None,
     sensor_id: str | None = None,
     solver: str = "lm1",
     echo: Callable[[str], None] | None = print,
@@ -483,10 +493,14 @@ def calibrate_recording(
         cal = calibrate_accel(
             log,
             g=g,
-            window=window,
-            min_duration=min_static if log.sample_rate else None,
             sensor_id=sensor_id,
             solver=solver,
+            **detector_keywords(
+                window=window,
+                threshold_factor=threshold_factor,
+                min_static=min_static if log.sample_rate else None,
+                sample_rate=log.sample_rate,
+            ),
         )
         wrote = _save(lambda: cal.save(out["accel"]), out["accel"], errors)
         say(f"accelerometer, {path}:\n{cal.report()}\n{wrote[2:]}")
@@ -535,6 +549,7 @@ def calibrate_devices(
     field: float | None = None,
     window: int | None = None,
     min_static: float | None = None,
+    threshold_factor: float | None = None,
     sensor_ids: Sequence[str] | None = None,
     solver: str = "lm1",
     echo: Callable[[str], None] | None = print,
@@ -570,9 +585,12 @@ def calibrate_devices(
         for i, (lg, p) in enumerate(zip(logs, paths, strict=True)):
             detector = {}
             if kind == "accel":
-                detector["window"] = window
-                if min_static is not None and lg.sample_rate:
-                    detector["min_duration"] = min_static
+                detector = detector_keywords(
+                    window=window,
+                    threshold_factor=threshold_factor,
+                    min_static=min_static if lg.sample_rate else None,
+                    sample_rate=lg.sample_rate,
+                )
             try:
                 pts, info = prepare_log(lg, kind, **detector)
             except ValueError as exc:
@@ -669,6 +687,7 @@ def run(args) -> int:
         target_poses=args.target_poses,
         window=args.window,
         min_static=args.min_static,
+        threshold_factor=args.threshold_factor,
         baudrate=args.baud,
         columns=args.columns,
         scale=args.scale,
@@ -707,6 +726,7 @@ def run(args) -> int:
                 field=args.field,
                 window=args.window,
                 min_static=args.min_static,
+                threshold_factor=args.threshold_factor,
                 sensor_id=dev.url,
                 solver=args.solver,
             )
@@ -720,6 +740,7 @@ def run(args) -> int:
                 field=args.field,
                 window=args.window,
                 min_static=args.min_static,
+                threshold_factor=args.threshold_factor,
                 sensor_ids=[d.url for d in live],
                 solver=args.solver,
             )

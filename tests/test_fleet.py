@@ -77,6 +77,18 @@ def test_batch_cli_and_accel_cli_agree_on_a_real_log(tmp_path, capsys):
     assert b["status"] == "ok" and b["n_points"] == one.n_points
     z = np.abs(np.array(b["params"]) - one.params) / one.stderr
     assert z.max() < 1e-6, z
+    # the detector options reach every log of a batch as they reach calib-jax accel (issue 13:
+    # every command takes them): a fixed 0.3 s window and 2 s poses give other intervals
+    opts = ["--window", "30", "--min-static", "2"]
+    assert main(["accel", str(d / "xsens_acc.mat"), *opts, "--json", str(tmp_path / "o.json")]) == 0
+    argv = ["batch", str(d), "--pattern", "*.mat", *opts, "--json", str(tmp_path / "c.json")]
+    assert main(argv) == 0
+    one_opts = cj.AccelCalibration.load(tmp_path / "o.json")
+    [c] = json.loads((tmp_path / "c.json").read_text())["results"]
+    assert c["static_intervals"] == one_opts.n_intervals and "window 30" in " ".join(c["notes"])
+    assert one_opts.n_points != one.n_points or np.any(one_opts.params != one.params)
+    z = np.abs(np.array(c["params"]) - one_opts.params) / one_opts.stderr
+    assert z.max() < 1e-6, z
 
 
 def test_an_unexpected_error_in_one_file_is_that_files_entry(fleet_dir, monkeypatch):
