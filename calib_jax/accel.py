@@ -297,6 +297,7 @@ def calibrate_accel(
     threshold_factor: float | None = None,
     min_duration: float | None = None,
     min_samples: int | None = None,
+    block: int | None = None,
     solver_options: dict | None = None,
     sensor_id: str | None = None,
 ) -> AccelCalibration:
@@ -328,6 +329,9 @@ def calibrate_accel(
         chooses its window and threshold from the data (a sweep scored by a fit of the interval
         means) and recognises pose tables (one row per pose); what it chose is reported in
         ``notes`` (lines starting "static detection"); ``warnings`` holds problems to act on.
+    block : int, optional
+        The log holds its poses as consecutive blocks of this many samples (recorded pose by
+        pose): the blocks are the intervals and nothing is detected.
     solver_options : dict, optional
         Passed to the solver (e.g. ``{"jacobian": "broyden", "rho_form": "paper"}``).
 
@@ -370,6 +374,7 @@ def calibrate_accel(
         threshold_factor=threshold_factor,
         min_duration=min_duration,
         min_samples=min_samples,
+        block=block,
     )
     warn: list[str] = list(obs.warnings)
     notes: list[str] = log_notes + obs.notes

@@ -85,15 +85,8 @@ def _detector_args(args: argparse.Namespace) -> dict:
 
 
 def _accel_detector(args: argparse.Namespace, sample_rate: float | None) -> dict:
-    from .accel import calibrate_accel
-
     out = detector_options(args, sample_rate)
     if getattr(args, "block", None) is not None:
-        if "block" not in inspect.signature(calibrate_accel).parameters:
-            raise ValueError(
-                f"--block {args.block}: this calibrate_accel cannot use fixed blocks yet; "
-                "use --window and --min-static (or calib-jax diagnose --block)"
-            )
         out["block"] = args.block
     return out
 

@@ -203,7 +203,7 @@ class StaticReport:
     trim: int = 0
     """Samples cut from each end of every run."""
     kind: str = "log"
-    """'log' (a time series) or 'pose_table' (one row per pose)."""
+    """'log' (a time series), 'pose_table' (one row per pose) or 'blocks' (fixed blocks)."""
     how: str = "given"
     """'sweep' (chosen by score), 'default' (no candidate scorable: classic setting), 'given'
     (every setting explicit) or 'pose_table'."""
@@ -231,6 +231,11 @@ class StaticReport:
         """The chosen setting in words."""
         if self.kind == "pose_table":
             return f"pose table: {len(self.intervals)} rows, each row taken as one pose"
+        if self.kind == "blocks":
+            return (
+                f"fixed blocks of {self.window} samples (--block): {len(self.intervals)} blocks "
+                "with every sample usable, each taken as one pose; nothing detected"
+            )
         w = f"window {self.window} samples"
         if sample_rate:
             w += f" ({self.window / sample_rate:.3g} s)"
@@ -300,7 +305,7 @@ class StaticReport:
     def notes(self, sample_rate: float | None = None) -> list[str]:
         """What a calibration report should say about detection (setting, found, candidates)."""
         out = [self.setting(sample_rate), *self.extra_notes]
-        if self.kind == "pose_table":
+        if self.kind in ("pose_table", "blocks"):
             return out
         out.append(self.summary(sample_rate))
         if self.rejected:
@@ -325,7 +330,7 @@ class StaticReport:
         if sample_rate:
             lens = lens / sample_rate
             unit = "s"
-        if self.kind == "pose_table":
+        if self.kind in ("pose_table", "blocks"):
             return self.setting(sample_rate)
         if len(lens) == 0:
             return "no static intervals"
@@ -799,6 +804,33 @@ def _pose_table_report(x: np.ndarray, valid: np.ndarray) -> StaticReport:
     )
 
 
+def _block_report(x: np.ndarray, valid: np.ndarray, block: int) -> StaticReport:
+    if block < 1:
+        raise ValueError(f"block must be a positive number of samples, got {block}")
+    starts = range(0, len(x) - block + 1, block)
+    intervals = [
+        StaticInterval(
+            start=a, stop=a + block, mean=x[a : a + block].mean(0), std=x[a : a + block].std(0)
+        )
+        for a in starts
+        if valid[a : a + block].all()
+    ]
+    mask = np.zeros(len(x), bool)
+    for iv in intervals:
+        mask[iv.start : iv.stop] = True
+    return StaticReport(
+        intervals=intervals,
+        mask=mask,
+        threshold=float("nan"),
+        noise_level=float("nan"),
+        window=block,
+        min_samples=block,
+        automatic=False,
+        kind="blocks",
+        how="blocks",
+    )
+
+
 # ---------------------------------------------------------------------------------------------
 # the detector
 
@@ -815,6 +847,7 @@ def detect_static(
     valid: np.ndarray | None = None,
     trim: int | None = None,
     pose_table: bool | None = None,
+    block: int | None = None,
 ) -> StaticReport:
     """Find the static intervals of a log of 3-axis readings (module docstring).
 
@@ -845,6 +878,10 @@ def detect_static(
         True: every row is a pose; False: never; default: recognised when there is no sample
         rate, no explicit window, threshold or minimum length, few rows and neighbouring rows
         far apart.
+    block : int, optional
+        The log was recorded pose by pose in blocks of this many samples (CK-Explorer's 160
+        poses x 100): the blocks are the intervals (those with a sample not ``valid`` are left
+        out), and nothing is detected.
 
     Raises
     ------
@@ -856,6 +893,25 @@ def detect_static(
     x = np.asarray(x, float)
     n = len(x)
     valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
+    if block is not None:
+        given = [
+            k
+            for k, v in (
+                ("window", window),
+                ("threshold", threshold),
+                ("threshold_factor", threshold_factor),
+                ("min_duration", min_duration),
+                ("min_samples", min_samples),
+                ("trim", trim),
+            )
+            if v is not None
+        ]
+        if given:
+            raise ValueError(
+                f"block replaces detection: leave out {', '.join(given)} (--window, "
+                "--threshold-factor, --min-static) or the block"
+            )
+        return _block_report(x, valid, int(block))
     if min_duration is not None and min_samples is None and not sample_rate:
         raise ValueError("min_duration needs sample_rate; or give min_samples instead")
 

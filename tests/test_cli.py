@@ -465,14 +465,21 @@ def test_detector_options_reach_the_fit(monkeypatch):
     assert seen["min_duration"] == 2.0 and "min_samples" not in seen
 
 
-def test_block_needs_a_calibrate_accel_that_takes_it(capsys):
-    from calib_jax.accel import calibrate_accel
+def test_block_gives_the_blocks_to_every_command(tmp_path, capsys):
+    """--block N (a log recorded pose by pose in blocks of N samples: CK-Explorer's 160 x 100)
+    is taken by accel as by diagnose: the blocks are the intervals, nothing is detected, the
+    note says so; with a detector option beside it the error names the clash."""
+    from calib_jax.datasets import accel_tumble_log_path
 
-    if "block" in inspect.signature(calibrate_accel).parameters:
-        pytest.skip("calibrate_accel takes block=: --block is passed through")
-    for command in ("accel", "marg"):
-        assert main([command, str(demo_log_path()), "--block", "100"]) == 2
-        assert "--block 100" in capsys.readouterr().err
+    out = tmp_path / "cal.json"
+    assert main(["accel", str(accel_tumble_log_path()), "--block", "100", "--json", str(out)]) == 0
+    cal = cj.AccelCalibration.load(out)
+    assert cal.n_intervals == 160 and cal.status == "ok"
+    assert any(n.startswith("fixed blocks of 100 samples") for n in cal.notes)
+    capsys.readouterr()
+    argv = ["accel", str(accel_tumble_log_path()), "--block", "100", "--window", "20"]
+    assert main(argv) == 2
+    assert "block replaces detection: leave out window" in capsys.readouterr().err
 
 
 def test_headerless_three_columns_read_as_the_commands_sensor(tmp_path, capsys):

@@ -935,16 +935,15 @@ def diagnose_accel(
     ok, det_notes = screen_samples(x, "accel")  # the way in of calibrate_accel
     if intervals is not None:
         spans = [(int(a), int(b)) for a, b in intervals if b - a > 1 and ok[a:b].all()]
-    elif block:
-        spans = [(a, a + block) for a in range(0, n - block + 1, block)]
-        spans = [(a, b) for a, b in spans if ok[a:b].all()]
     else:
-        # calibrate_accel's way in: the same screen, detector (a sweep scored by the fit) and
-        # pose checks, so a log it refuses is not diagnosed either
+        # calibrate_accel's way in: the same screen, detector (a sweep scored by the fit, or
+        # fixed blocks) and pose checks, so a log it refuses is not diagnosed either
         from ..accel import check_poses
 
         try:
-            found = accel_observations(x, sample_rate=sample_rate, **static_options)
+            found = accel_observations(
+                x, sample_rate=sample_rate, block=block or None, **static_options
+            )
             check_poses(found, "accel9", sample_rate)
         except ValueError as exc:
             d = _not_possible("accel", 0, "9 distinct static poses", str(exc), source)
