@@ -229,21 +229,32 @@ def calibrate_files_dask(
     use: str = "means",
     detector: dict | None = None,
     **options,
-) -> list[dict]:
-    """:func:`calibrate_files` with the chunks spread over a Dask cluster.
+) -> Iterator[dict]:
+    """:func:`calibrate_files` with the chunks spread over a Dask cluster; each file's result
+    is yielded as soon as its chunk is done (chunks in the order they finish, files in order
+    within a chunk: sort by ``path`` if you need the input order, or ``list()`` it).
 
     ``scheduler``: the address of a running scheduler (``tcp://host:8786``); default a
-    ``LocalCluster`` with ``n_workers`` single-threaded worker processes on this machine.
-    Needs ``dask[distributed]`` (``pip install 'calib_jax[dask]'``). Workers must be able to
-    read the paths (a shared file system, or the same paths on every machine).
+    ``LocalCluster`` with ``n_workers`` single-threaded worker processes on this machine,
+    started when the first result is asked for and closed after the last (or when the
+    iterator is closed). Needs ``dask[distributed]`` (``pip install 'calib_jax[dask]'``).
+    Workers must be able to read the paths (a shared file system, or the same paths on every
+    machine).
     """
     try:
-        from dask.distributed import Client, LocalCluster
+        import dask.distributed  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError(
             "calibrate_files_dask needs dask[distributed]: pip install 'calib_jax[dask]'"
         ) from exc
-    paths = [str(p) for p in paths]
+    parts = list(_chunks([str(p) for p in paths], chunk))
+    task = dict(sensor=sensor, columns=columns, options=options, use=use, detector=detector)
+    return _stream_from_dask(parts, task, scheduler, n_workers)
+
+
+def _stream_from_dask(parts, task, scheduler, n_workers) -> Iterator[dict]:
+    from dask.distributed import Client, LocalCluster, as_completed
+
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(
@@ -253,20 +264,10 @@ def calibrate_files_dask(
     else:
         client = Client(scheduler)
     try:
-        parts = list(_chunks(paths, chunk))
-        futures = client.map(
-            _fit_chunk,
-            parts,
-            sensor=sensor,
-            columns=columns,
-            options=options,
-            use=use,
-            detector=detector,
-            pure=False,
-        )
-        results = client.gather(futures)
+        futures = client.map(_fit_chunk, parts, pure=False, **task)
+        for future in as_completed(futures):
+            yield from future.result()
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    return [r for part in results for r in part]

@@ -196,14 +196,34 @@ def test_batch_cli_bad_directory(tmp_path, capsys):
     assert "no files matching" in capsys.readouterr().err
 
 
-def test_dask_local_cluster_gives_the_same_results(fleet_dir):
-    """Two worker processes, one chunk each: the same results as the in-process stream."""
+def test_dask_local_cluster_gives_the_same_results(fleet_dir, tmp_path, capsys):
+    """A scheduler and two worker processes on the loopback, chunks of 3 files: the Python
+    stream and ``calib-jax batch --dask ADDRESS`` give the in-process stream's results
+    (parameters to 1e-12 relative), and the unreadable file is that file's entry."""
     pytest.importorskip("dask.distributed")
+    from dask.distributed import LocalCluster
+
     d, _ = fleet_dir
     paths = sorted(str(p) for p in d.glob("imu*.csv"))
     local = list(calibrate_files(paths, chunk=3, progress=False))
-    dist = calibrate_files_dask(paths, n_workers=2, chunk=3)
+    cluster = LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    )
+    try:
+        address = cluster.scheduler_address
+        assert address.startswith("tcp://127.0.0.1:")
+        stream = calibrate_files_dask(paths, scheduler=address, chunk=3)
+        assert not isinstance(stream, list)  # an iterator: results come back as chunks finish
+        dist = sorted(stream, key=lambda r: r["path"])
+        out = tmp_path / "fleet.json"
+        argv = ["batch", str(d), "--dask", address, "--chunk", "3", "--json", str(out)]
+        assert main(argv) == 1  # broken.csv
+    finally:
+        cluster.close()
     assert [r["path"] for r in dist] == paths
+    cli = {e["path"]: e for e in cj.BatchRecord.load(out).entries}
+    assert cli[str(d / "broken.csv")]["status"] == "load_error"
     for a, b in zip(local, dist, strict=True):
         np.testing.assert_allclose(a["params"], b["params"], rtol=1e-12)
-        assert a["status"] == b["status"] == "ok"
+        np.testing.assert_allclose(a["params"], cli[a["path"]]["params"], rtol=1e-12)
+        assert a["status"] == b["status"] == cli[a["path"]]["status"] == "ok"
