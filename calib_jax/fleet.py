@@ -79,7 +79,6 @@ def fit_prepared(
     """
     import jax
 
-    jax.config.update("jax_enable_x64", True)
     from .batch import (
         _units_from_norm,
         calibrate_accel_batch,
@@ -108,13 +107,15 @@ def fit_prepared(
     for i, (_, x, _) in enumerate(fit):
         raw[i, : len(x)] = x
         mask[i, : len(x)] = True
-    if sensor == "accel":
-        # interval means: the pose checks ran on the host; the batch's own floor is the
-        # model's parameter count plus one
-        r = calibrate_accel_batch(raw, mask, g=np.asarray(gs), min_points=10, **options)
-    else:
-        r = calibrate_mag_batch(raw, mask, **options)
-    entries = r.entries([str(name) for name, _, _ in fit])
+    # float64 for this fit only: the caller's (or a Dask worker's) jax setting is left as it was
+    with jax.enable_x64(True):
+        if sensor == "accel":
+            # interval means: the pose checks ran on the host; the batch's own floor is the
+            # model's parameter count plus one
+            r = calibrate_accel_batch(raw, mask, g=np.asarray(gs), min_points=10, **options)
+        else:
+            r = calibrate_mag_batch(raw, mask, **options)
+        entries = r.entries([str(name) for name, _, _ in fit])
     ref = {"field": options.get("field")} if sensor == "mag" else {}  # accel: each info's g
     out += [{**e, **info, **ref} for e, (_, _, info) in zip(entries, fit, strict=True)]
     return out

@@ -227,3 +227,25 @@ def test_dask_local_cluster_gives_the_same_results(fleet_dir, tmp_path, capsys):
         np.testing.assert_allclose(a["params"], b["params"], rtol=1e-12)
         np.testing.assert_allclose(a["params"], cli[a["path"]]["params"], rtol=1e-12)
         assert a["status"] == b["status"] == cli[a["path"]]["status"] == "ok"
+
+
+def test_a_fleet_fit_leaves_the_callers_jax_setting_alone(fleet_dir):
+    """Issue 17: calibrate_files fits in float64 without switching jax_enable_x64 on for the
+    caller (it used to set it globally). In a fresh process with x64 off: the flag is still off
+    afterwards and the parameters are the float64 ones of this (x64) process to 1e-12."""
+    import subprocess
+    import sys
+
+    d, _ = fleet_dir
+    path = str(d / "imu0.csv")
+    code = (
+        "import json, jax; from calib_jax.fleet import calibrate_files; "
+        f"[r] = calibrate_files([{path!r}], progress=False); "
+        "print(json.dumps([jax.config.jax_enable_x64, r['params']]))"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    x64, params = json.loads(run.stdout.splitlines()[-1])
+    assert x64 is False
+    [here] = calibrate_files([path], progress=False)
+    np.testing.assert_allclose(params, here["params"], rtol=1e-12)
