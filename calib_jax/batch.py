@@ -206,9 +206,7 @@ class BatchResult(eqx.Module):
 
         if self.sensor == "accel":
             return jax.vmap(AccelParams.from_vector)(self.params)
-        return jax.vmap(lambda p: MagParams(hard_iron=p[:3], soft_iron=p[3:].reshape(3, 3)))(
-            self.params
-        )
+        return jax.vmap(MagParams.from_vector)(self.params)
 
     def rows(self, names=None) -> list[dict]:
         """One flat dict per sensor: file (``names`` or the index), status, message, each

@@ -946,7 +946,7 @@ class BatchRecord:
             if self.sensor == "accel":
                 out[e["path"]] = AccelParams.from_vector(p)
             else:
-                out[e["path"]] = MagParams(hard_iron=p[:3], soft_iron=p[3:].reshape(3, 3))
+                out[e["path"]] = MagParams.from_vector(p)
         return out
 
     def to_dataframe(self):

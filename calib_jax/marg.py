@@ -26,7 +26,13 @@ import numpy as np
 
 from .align import MagAccelAlignment, PlaneAlignment, align_mag_to_accel, plane_alignment
 from .attitude import estimate_attitude
-from .calibration import AccelCalibration, MagCalibration, _read_json, _sanitize
+from .calibration import (
+    AccelCalibration,
+    FitStatusWarning,
+    MagCalibration,
+    _read_json,
+    _sanitize,
+)
 from .mag import calibrate_mag
 from .status import is_usable, worst_status
 
@@ -449,7 +455,7 @@ def calibrate_marg_log(
             method = "ellipsoid"
     if method == "ellipsoid":
         with warnings.catch_warnings():  # a failed fit says why in its status and warnings
-            warnings.simplefilter("ignore", UserWarning)
+            warnings.simplefilter("ignore", FitStatusWarning)
             acal = calibrate_mag(
                 log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
             )
@@ -462,7 +468,7 @@ def calibrate_marg_log(
             )
             acal, method = None, "none"
     with warnings.catch_warnings():  # its status and warnings are in the record's mag block
-        warnings.simplefilter("ignore", UserWarning)
+        warnings.simplefilter("ignore", FitStatusWarning)
         mcal = calibrate_mag(log, model=mag_model, field=field, solver=solver, sensor_id=sensor_id)
     acc = np.asarray(log.acc, float) if acal is None else acal.apply(log.acc)
     try:

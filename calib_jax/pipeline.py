@@ -97,6 +97,12 @@ class MagParams(eqx.Module):
         return (raw - self.hard_iron) @ self.soft_iron.T
 
     @classmethod
+    def from_vector(cls, p: Float[Array, "12"]) -> MagParams:
+        """From the batch layout: the centre (3), then W row by row (9)."""
+        p = jnp.asarray(p)
+        return cls(hard_iron=p[:3], soft_iron=p[3:].reshape(3, 3))
+
+    @classmethod
     def identity(cls, dtype=jnp.float64) -> MagParams:
         """No hard iron, unit soft iron (a reference point, never a fit result)."""
         return cls(hard_iron=jnp.zeros(3, dtype), soft_iron=jnp.eye(3, dtype=dtype))
