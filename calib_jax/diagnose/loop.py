@@ -574,7 +574,7 @@ def _run(
             if "outliers" not in effects:
                 effects.append("outliers")
 
-        # --- parametric candidates: real, halves, null sims in one vmapped call
+        # --- parametric candidates: real, halves, null sims, one compiled fit for all
         # correlated residuals (a filtered magnetometer) make the formal standard errors too
         # small by sqrt((1 + rho) / (1 - rho)), rho the lag-1 autocorrelation in time
         ea = cur["e"][order][(w[order] > 0)]

@@ -20,7 +20,6 @@ the permutation, |dt| <= 0.5 s), and the floors come from the longest rest.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import jax
@@ -45,6 +44,7 @@ from .loop import (
     driver_designs,
     regress_drivers,
 )
+from .model import fit_each
 
 N_P = 5  # rotvec (3), theta, dt
 SLOTS = {"sensor_misalignment": [0, 1, 2], "timing_offset": [4]}
@@ -85,30 +85,20 @@ def _fit_one(p0, a, t, tm, m, P, w, free):
     return res.params, res.stderr, res.status, e, J
 
 
-@functools.lru_cache(maxsize=1)
-def _compiled():
-    return jax.jit(jax.vmap(_fit_one))
+@jax.jit
+def _compiled(p0, m, P, w, free, a, t, tm):
+    return _fit_one(p0, a, t, tm, m, P, w, free)
 
 
 def _run(rows, a, t, tm):
-    """rows: (p0, m_series, P, w, free) per problem; one vmapped call."""
+    """rows: (p0, m_series, P, w, free) per problem, fitted in turn by one compiled fit."""
     n = len(rows)
     p0 = np.stack([r[0] for r in rows])
     ms = np.stack([r[1] for r in rows])
     Ps = np.stack([r[2] for r in rows])
     w = np.stack([r[3] for r in rows])
     fr = np.stack([r[4] for r in rows])
-    out = _compiled()(
-        jnp.asarray(p0),
-        jnp.broadcast_to(jnp.asarray(a), (n, *a.shape)),
-        jnp.broadcast_to(jnp.asarray(t), (n, *t.shape)),
-        jnp.broadcast_to(jnp.asarray(tm), (n, *tm.shape)),
-        jnp.asarray(ms),
-        jnp.asarray(Ps),
-        jnp.asarray(w),
-        jnp.asarray(fr),
-    )
-    out = [np.asarray(o) for o in out]
+    out = fit_each(_compiled, p0, ms, Ps, w, fr, shared=(a, t, tm))
     return [_summary(*(o[k] for o in out), w[k], fr[k]) for k in range(n)]
 
 
