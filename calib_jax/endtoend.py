@@ -50,6 +50,7 @@ from .rotations import (
 )
 
 
+@jax.jit  # eager, the vmap ran (and compiled) each quaternion operation on its own
 def attitude_errors(q_est: jax.Array, q_ref: jax.Array) -> jax.Array:
     """(N, 2): BROAD's [heading, inclination] error in degrees of each sample."""
     return jax.vmap(heading_inclination_error_deg)(q_est, q_ref)
@@ -93,6 +94,7 @@ def unpack(theta: jax.Array, base: MargParams) -> MargParams:
     return MargParams(base.acc, MagParams(theta[:3], W), Rotation(theta[9:12]))
 
 
+@jax.jit
 def offset_reference(q_ref: jax.Array, offset: jax.Array) -> jax.Array:
     """q_z(h) (x) q_ref (x) q(v) for offset = [v (3), h]: the reference corrected by a constant
     body-frame rotation and a heading offset."""
@@ -262,11 +264,15 @@ def _restrict(res: LMResult, free: np.ndarray) -> LMResult:
     """The LM result over the free parameters only (the held ones have pinning rows, not
     data: their standard errors mean nothing)."""
     idx = np.flatnonzero(free)
-    sub = (
-        res.params[idx],
-        res.covariance[np.ix_(idx, idx)],
-        res.stderr[idx],
-        res.correlation[np.ix_(idx, idx)],
+    # numpy indexing: a jax index compiles one small program per shape
+    sub = tuple(
+        jnp.asarray(np.asarray(a)[ix])
+        for a, ix in (
+            (res.params, idx),
+            (res.covariance, np.ix_(idx, idx)),
+            (res.stderr, idx),
+            (res.correlation, np.ix_(idx, idx)),
+        )
     )
     return eqx.tree_at(lambda r: (r.params, r.covariance, r.stderr, r.correlation), res, sub)
 
@@ -310,9 +316,11 @@ def evaluate(
     """RMS and median heading and inclination error (deg) over the samples in ``mask``."""
     k = np.asarray(mask, bool) & np.all(np.isfinite(quat_ref), axis=1)
     k &= np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
-    q = _attitude_jit(params, jnp.asarray(acc[k]), jnp.asarray(mag[k]), jnp.asarray(dip_deg))
     ref = quat_ref[k] / np.linalg.norm(quat_ref[k], axis=1, keepdims=True)
-    e = np.asarray(attitude_errors(q, jnp.asarray(ref)))
+    # padded to a power of two (the first row repeated): one compilation serves every mask
+    rows = [pad_rows(a[k])[0] for a in (acc, mag)]
+    q = _attitude_jit(params, *(jnp.asarray(r) for r in rows), jnp.asarray(dip_deg))
+    e = np.asarray(attitude_errors(q, jnp.asarray(pad_rows(ref)[0])))[: int(k.sum())]
     return {
         "n": int(k.sum()),
         "heading_rms": float(np.sqrt(np.mean(e[:, 0] ** 2))),
