@@ -41,10 +41,11 @@ from .geometry import (
 )
 from .implicit import solve_implicit
 from .io.files import SensorLog
-from .lm import LMResult, fit_status, lm_solve, optx_solve, status_message
+from .lm import LMResult, fit_status, lm_solve, status_message
 from .models.accel import PARAM_NAMES, normalized_sphere_residual
 from .observations import AccelObservations, accel_observations, detection_found
 from .padding import pad_rows
+from .runtime import disk_jit
 from .static import StaticReport, distinct_directions
 
 G_STANDARD = 9.80665
@@ -140,6 +141,8 @@ def fit_normalized(
     if solver == "optimistix":
         if implicit:
             raise ValueError("implicit=True needs an LM solver (lm1, lm2, lm3)")
+        from .lm.optx import optx_solve
+
         res = optx_solve(residual, p0[idx], data, weights=w, **options)
     else:
         update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
@@ -166,7 +169,10 @@ def fit_normalized(
 
 @functools.lru_cache(maxsize=64)
 def _compiled(solver: str, model: str, options: tuple) -> Callable:
-    return jax.jit(functools.partial(fit_normalized, solver=solver, model=model, **dict(options)))
+    return disk_jit(
+        functools.partial(fit_normalized, solver=solver, model=model, **dict(options)),
+        f"accel.fit_normalized {solver} {model} {options!r}",
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -234,7 +240,7 @@ def _vec(v: np.ndarray) -> str:
 
 # one compiled call (reloaded from the persistent cache) instead of ~25 eager operations, each
 # traced and looked up in a new process: 1.6 s of a 5 s warm `calib-jax accel`
-_sphere_fit = jax.jit(sphere_fit)
+_sphere_fit = disk_jit(sphere_fit, "geometry.sphere_fit")
 
 
 def check_poses(
@@ -245,7 +251,7 @@ def check_poses(
     there are fewer distinct poses than free parameters or all poses lie in one plane.
     ``calibrate_accel`` and the batch paths (:mod:`calib_jax.fleet`) both call it."""
     pts = obs.points
-    c_s, r_s = _sphere_fit(pts, np.ones(len(pts)))
+    c_s, r_s = _sphere_fit(*pad_rows(pts))  # padded: one executable for similar counts
     c_s, r_s = np.asarray(c_s), float(r_s)
     if not np.isfinite(r_s) or r_s <= 0:
         c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))

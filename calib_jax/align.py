@@ -27,6 +27,7 @@ import numpy as np
 from .lm import is_converged, lm_solve, status_message
 from .padding import pad_rows
 from .rotations import describe_permutation, rotation_angle_deg, rotvec_to_dcm, signed_permutations
+from .runtime import disk_jit
 
 # ---------------------------------------------------------------------------------------------
 # sensor plane alignment: pure parts
@@ -226,7 +227,7 @@ def _compiled_dip(max_iter: int):
     def solve(p0, a, m, P, w):
         return lm_solve(dip_residual, p0, (a, m, P), weights=w, update_type=1, max_iter=max_iter)
 
-    return jax.jit(solve)
+    return disk_jit(solve, f"align.dip {max_iter}")
 
 
 @dataclass(frozen=True)

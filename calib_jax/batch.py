@@ -39,7 +39,7 @@ from .accel import _units_from_norm, initial_guess_moments
 from .calibration import BatchRecord
 from .geometry import moments
 from .linalg import cholesky_small, eigh_small, inv3
-from .lm import LMResult, lm_solve, optx_solve
+from .lm import LMResult, lm_solve
 from .mag import ellipsoid_start_moments
 from .models.accel import alpha_matrix
 from .models.mag import (
@@ -300,6 +300,8 @@ def _solve(theta_fn, p0, S, dof, solver, options):
     # Cholesky covariance: the Jacobi eigh was 0.1 of the 0.12 ms per sensor of the LM stage
     options = {"covariance_method": "cholesky", **options}
     if solver == "optimistix":
+        from .lm.optx import optx_solve
+
         return optx_solve(residual, p0, Lt, dof=dof, **options)
     update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
     return lm_solve(residual, p0, Lt, update_type=update_type, dof=dof, **options)

@@ -45,7 +45,7 @@ from .geometry import (
 )
 from .implicit import solve_implicit
 from .io.files import SensorLog
-from .lm import LMResult, fit_status, is_converged, lm_solve, optx_solve, status_message
+from .lm import LMResult, fit_status, is_converged, lm_solve, status_message
 from .models.mag import (
     MAG_MODELS,
     N_PARAMS,
@@ -60,6 +60,7 @@ from .models.mag import (
 )
 from .observations import screen_samples
 from .padding import pad_rows
+from .runtime import disk_jit
 from .sphere import sphere_coverage  # noqa: F401  (re-exported: calib_jax.mag.sphere_coverage)
 from .status import is_usable
 
@@ -139,6 +140,8 @@ def fit_ellipsoid_normalized(
     if solver == "optimistix":
         if implicit:
             raise ValueError("implicit=True needs an LM solver (lm1, lm2, lm3)")
+        from .lm.optx import optx_solve
+
         return optx_solve(residual, p0, (x, w), weights=w, **options)
     update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
     if implicit:
@@ -151,8 +154,9 @@ def fit_ellipsoid_normalized(
 
 @functools.lru_cache(maxsize=64)
 def _compiled(solver: str, model: str, options: tuple):
-    return jax.jit(
-        functools.partial(fit_ellipsoid_normalized, solver=solver, model=model, **dict(options))
+    return disk_jit(
+        functools.partial(fit_ellipsoid_normalized, solver=solver, model=model, **dict(options)),
+        f"mag.fit_ellipsoid_normalized {solver} {model} {options!r}",
     )
 
 
@@ -165,7 +169,7 @@ def _raw_calibration(model: str):
         c, W = raw_calibration(p, model, mean, scale, field)
         return c, W, raw_covariance(p, cov, model, mean, scale, field)
 
-    return jax.jit(f)
+    return disk_jit(f, f"mag.raw_calibration {model}")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -16,10 +16,12 @@ CPU): 18.5 s in a new process without the cache, 4.2 s with a warm one.
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from pathlib import Path
 
 _OFF = ("", "0", "off", "false", "no", "none")
+_AOT_DIR: list[Path] = []  # where DiskJit keeps executables: set by configure()
 ENV = "CALIB_JAX_CACHE_DIR"
 
 
@@ -40,6 +42,7 @@ def configure(*, x64: bool = True, cache: bool = True) -> str:
     if x64:
         jax.config.update("jax_enable_x64", True)
     path = cache_dir() if cache else None
+    _AOT_DIR.clear()
     if path is None:
         return "compilation cache off"
     try:
@@ -50,6 +53,7 @@ def configure(*, x64: bool = True, cache: bool = True) -> str:
     except OSError as exc:
         return f"compilation cache off: {path} is not writable ({exc.strerror or exc})"
     jax.config.update("jax_compilation_cache_dir", str(path))
+    _AOT_DIR.append(path / "aot")
     # every fit's compile takes seconds, the smallest helpers milliseconds: keep them all, the
     # cache of a full demo is under 1 MB
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
@@ -59,3 +63,166 @@ def configure(*, x64: bool = True, cache: bool = True) -> str:
         "once", message="Error reading persistent compilation cache entry", category=UserWarning
     )
     return f"compilation cache {path}"
+
+
+# ---------------------------------------------------------------------------------------------
+# compiled fits kept whole on disk
+
+
+class DiskJit:
+    """``jax.jit(fun)`` whose traced and lowered program is also kept on disk, so that a new
+    process skips the tracing and lowering as well as the compilation.
+
+    JAX's persistent cache (above) only skips XLA's compile: it is keyed by the lowered
+    program, so every new process still traces and lowers each fit, about 1-2 s of a warm CLI
+    call on a 2-core CPU. Once :func:`configure` has turned the cache on, a call with concrete
+    arrays looks up the program exported by :mod:`jax.export` (JAX's own stable serialization)
+    in the cache's ``aot`` folder, keyed by ``key`` (which must name the function and every
+    static option), the arguments' shapes and dtypes, the JAX version, x64, the device and
+    the source of calib_jax itself (an edited package never loads an old program); its
+    compilation then comes from the persistent cache. A call with tracers (inside a user's
+    jit, grad or vmap) and a cache that is off, unreadable, corrupt or read-only all fall back
+    to the plain ``jax.jit`` call: the disk can never break a fit. Outputs may be arrays,
+    tuples, dicts, None and equinox modules (rebuilt field by field).
+    """
+
+    def __init__(self, fun, key: str):
+        import jax
+
+        self.fun = fun
+        self.key = key
+        self.jitted = jax.jit(fun)
+        self._loaded: dict[str, object] = {}
+
+    def __call__(self, *args):
+        import jax
+
+        leaves, in_tree = jax.tree_util.tree_flatten(args)
+        if not _AOT_DIR or any(isinstance(x, jax.core.Tracer) for x in leaves):
+            return self.jitted(*args)
+        try:
+            leaves = [jax.numpy.asarray(x) for x in leaves]
+            digest = self._digest(leaves, in_tree)
+            exported = self._loaded.get(digest) or self._load_or_export(
+                _AOT_DIR[0] / f"{digest}.jaxexport", leaves, in_tree
+            )
+            self._loaded[digest] = exported
+            return _unplain(exported.call(*leaves))
+        except Exception as exc:  # noqa: BLE001 - the disk is an optimisation, never a failure
+            warnings.warn(f"compiled-fit cache skipped ({type(exc).__name__}: {exc})", stacklevel=2)
+            return self.jitted(*args)
+
+    def _digest(self, leaves, in_tree) -> str:
+        import hashlib
+
+        avals = [(x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves]
+        parts = (self.key, str(in_tree), avals, _environment())
+        return hashlib.sha256(repr(parts).encode()).hexdigest()[:32]
+
+    def _load_or_export(self, path: Path, leaves, in_tree):
+        import jax
+        from jax import export
+
+        try:
+            return export.deserialize(bytearray(path.read_bytes()))
+        except FileNotFoundError:
+            pass
+        except Exception:  # noqa: BLE001 - corrupt or foreign: export again below
+            path.unlink(missing_ok=True)
+
+        def flat(*xs):
+            return _plain(self.fun(*jax.tree_util.tree_unflatten(in_tree, list(xs))))
+
+        # custom calls (LAPACK through lineax) with no cross-version guarantee are allowed: the
+        # key holds the JAX version, so the program only ever runs where it was made
+        targets: set[str] = set()
+        for _ in range(4):
+            checks = [export.DisabledSafetyCheck.custom_call(t) for t in sorted(targets)]
+            try:
+                exported = export.export(jax.jit(flat), disabled_checks=checks)(*leaves)
+                break
+            except ValueError as exc:
+                found = set(re.findall(r"custom_call @(\w+)", str(exc))) - targets
+                if not found:
+                    raise
+                targets |= found
+        else:
+            raise ValueError(f"custom calls still refused after allowing {sorted(targets)}")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_bytes(exported.serialize())
+            os.replace(tmp, path)  # atomic: a reader never sees half a file
+        except OSError:
+            pass  # read-only or full disk: this process keeps the program in memory
+        return exported
+
+
+def disk_jit(fun, key: str) -> DiskJit:
+    """:class:`DiskJit`: ``jax.jit(fun)`` with whole executables kept on disk under ``key``."""
+    return DiskJit(fun, key)
+
+
+_ENV_DIGEST: list[str] = []
+
+
+def _environment() -> str:
+    """What an exported program depends on besides its arguments: JAX, x64, the device and
+    calib_jax's own source (hashed once per process)."""
+    if _ENV_DIGEST:
+        return _ENV_DIGEST[0]
+    import hashlib
+
+    import jax
+
+    h = hashlib.sha256()
+    for f in sorted(Path(__file__).resolve().parent.rglob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    dev = jax.devices()[0]
+    h.update(repr((jax.__version__, jax.config.jax_enable_x64, dev.platform)).encode())
+    _ENV_DIGEST.append(h.hexdigest())
+    return _ENV_DIGEST[0]
+
+
+_TAG = "__equinox__ "
+
+
+def _plain(tree):
+    """Equinox modules -> {"__equinox__ module:class": {field: value}}: the class lives in a
+    dict key, part of the tree's structure (a plain dict's structure pickles; a module's does
+    not load), never a leaf."""
+    import dataclasses
+
+    import equinox as eqx
+
+    if isinstance(tree, eqx.Module):
+        cls = type(tree)
+        fields = {f.name: _plain(getattr(tree, f.name)) for f in dataclasses.fields(tree)}
+        return {f"{_TAG}{cls.__module__}:{cls.__qualname__}": fields}
+    if isinstance(tree, tuple | list):
+        return type(tree)(_plain(x) for x in tree)
+    if isinstance(tree, dict):
+        return {k: _plain(v) for k, v in tree.items()}
+    return tree
+
+
+def _unplain(tree):
+    import importlib
+
+    if isinstance(tree, dict) and len(tree) == 1:
+        ((key, fields),) = tree.items()
+        if isinstance(key, str) and key.startswith(_TAG):
+            module, name = key[len(_TAG) :].split(":")
+            cls = importlib.import_module(module)
+            for part in name.split("."):
+                cls = getattr(cls, part)
+            obj = object.__new__(cls)
+            for field, value in fields.items():
+                object.__setattr__(obj, field, _unplain(value))
+            return obj
+    if isinstance(tree, tuple | list):
+        return type(tree)(_unplain(x) for x in tree)
+    if isinstance(tree, dict):
+        return {k: _unplain(v) for k, v in tree.items()}
+    return tree

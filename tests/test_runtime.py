@@ -74,3 +74,59 @@ def test_a_cache_path_that_is_a_file_is_skipped(tmp_path):
     r = _run(PROGRAM, {ENV: str(blocker / "cache")})
     assert r.returncode == 0, r.stderr
     assert "compilation cache off" in r.stdout and r.stdout.split()[-1] == EXPECTED
+
+
+# A whole fit kept on disk (runtime.DiskJit): an LM fit of a line, whose result is an equinox
+# module (LMResult), the case JAX's own tree serialization cannot load.
+FIT_PROGRAM = """
+    import sys
+    import jax.numpy as jnp
+    from calib_jax.runtime import configure, disk_jit
+    from calib_jax.lm import lm_solve
+    print(configure())
+
+    def fit(x, y):
+        return lm_solve(lambda p, d: p[0] * d[0] + p[1] - d[1], jnp.zeros(2), (x, y))
+
+    x = jnp.linspace(0.0, 1.0, 20)
+    res = disk_jit(fit, "test.line")(x, 2.0 * x + 1.0 + 0.01 * jnp.sin(40 * x))
+    print(type(res).__name__, int(res.status), repr(float(res.params[0])), float(res.stderr[1]))
+"""
+
+
+def test_a_fit_kept_on_disk_is_reloaded_whole_and_survives_corruption(tmp_path):
+    """The second process loads the exported program (the file is not rewritten) and gets the
+    same result bit for bit: the same program compiles to the same executable. A corrupt file
+    is exported again, not fatal."""
+    runs = []
+    for k in range(3):
+        if k == 2:
+            for p in (tmp_path / "aot").iterdir():
+                p.write_bytes(b"not an exported program")
+        r = _run(FIT_PROGRAM, {ENV: str(tmp_path)})
+        assert r.returncode == 0, r.stderr
+        assert "Traceback" not in r.stderr and "cache skipped" not in r.stderr, r.stderr
+        files = sorted((tmp_path / "aot").iterdir())
+        assert len(files) == 1
+        runs.append((r.stdout.splitlines()[-1], files[0].stat().st_mtime_ns, files[0].read_bytes()))
+    assert runs[0][0].startswith("LMResult ")
+    assert runs[0][0] == runs[1][0] == runs[2][0]
+    assert runs[1][1] == runs[0][1]  # loaded, not exported again
+    assert runs[2][2] == runs[0][2]  # the corrupt file was replaced by the same program
+
+
+def test_disk_jit_under_a_transformation_is_plain_jit(tmp_path, monkeypatch):
+    """Inside vmap (tracers) nothing is read or written; the answer is jax.jit's."""
+    import jax
+    import jax.numpy as jnp
+
+    from calib_jax import runtime
+
+    monkeypatch.setattr(runtime, "_AOT_DIR", [tmp_path / "aot"])
+    f = runtime.disk_jit(lambda x: {"s": jnp.sum(x**2)}, "test.square")
+    xs = jnp.arange(6.0).reshape(2, 3)
+    out = jax.vmap(f)(xs)
+    assert list(map(float, out["s"])) == [5.0, 50.0]
+    assert not (tmp_path / "aot").exists()
+    assert float(f(xs[1])["s"]) == 50.0  # concrete: exported and kept
+    assert len(list((tmp_path / "aot").iterdir())) == 1

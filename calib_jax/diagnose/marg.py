@@ -28,6 +28,7 @@ import numpy as np
 
 from ..lm import lm_solve
 from ..rotations import describe_permutation, rotvec_to_dcm, signed_permutations
+from ..runtime import disk_jit
 from ..static import detect_rest
 from .floors import allan_deviation
 from .loop import (
@@ -85,9 +86,11 @@ def _fit_one(p0, a, t, tm, m, P, w, free):
     return res.params, res.stderr, res.status, e, J
 
 
-@jax.jit
-def _compiled(p0, m, P, w, free, a, t, tm):
+def _fit_one_reordered(p0, m, P, w, free, a, t, tm):
     return _fit_one(p0, a, t, tm, m, P, w, free)
+
+
+_compiled = disk_jit(_fit_one_reordered, "diagnose.marg.fit_one")
 
 
 def _run(rows, a, t, tm):

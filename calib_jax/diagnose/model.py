@@ -31,6 +31,7 @@ import numpy as np
 
 from ..linalg import inv3
 from ..lm import lm_solve
+from ..runtime import disk_jit
 
 N_THETA = 30
 
@@ -133,7 +134,7 @@ def _fit_one(theta0, x, tau, temp, w, free, max_iter):
 
 @functools.lru_cache(maxsize=4)
 def _compiled_fit(max_iter: int):
-    return jax.jit(lambda *a: _fit_one(*a, max_iter))
+    return disk_jit(lambda *a: _fit_one(*a, max_iter), f"diagnose.fit_one {max_iter}")
 
 
 def fit_each(compiled, *stacked, shared: tuple = ()) -> tuple[np.ndarray, ...]:
