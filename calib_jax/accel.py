@@ -35,8 +35,8 @@ from .calibration import AccelCalibration, FitStatusWarning, apply_params
 from .geometry import (
     ellipsoid_fit_moments,
     moments,
-    sphere_fit,
     sphere_fit_moments,
+    sphere_fit_points,
     sqrtm_inv_spd,
 )
 from .implicit import solve_implicit
@@ -240,7 +240,6 @@ def _vec(v: np.ndarray) -> str:
 
 # one compiled call (reloaded from the persistent cache) instead of ~25 eager operations, each
 # traced and looked up in a new process: 1.6 s of a 5 s warm `calib-jax accel`
-_sphere_fit = disk_jit(sphere_fit, "geometry.sphere_fit")
 
 
 def check_poses(
@@ -251,8 +250,7 @@ def check_poses(
     there are fewer distinct poses than free parameters or all poses lie in one plane.
     ``calibrate_accel`` and the batch paths (:mod:`calib_jax.fleet`) both call it."""
     pts = obs.points
-    c_s, r_s = _sphere_fit(*pad_rows(pts))  # padded: one executable for similar counts
-    c_s, r_s = np.asarray(c_s), float(r_s)
+    c_s, r_s = sphere_fit_points(pts)
     if not np.isfinite(r_s) or r_s <= 0:
         c_s, r_s = pts.mean(axis=0), float(np.median(np.linalg.norm(pts - pts.mean(0), axis=1)))
     # counted about the fitted centre and about the nominal one (zero, or mid-range for

@@ -51,6 +51,23 @@ def sphere_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
     return sphere_fit_moments(moments(x, w))
 
 
+def sphere_fit_points(x: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`sphere_fit` of host points (N, 3), equal weights: padded to a power of two and
+    compiled once per size (kept on disk, :class:`calib_jax.runtime.DiskJit`). For the
+    host-side checks of the single fits; eager, its few dozen operations each cost a dispatch.
+    """
+    from .padding import pad_rows
+    from .runtime import disk_jit
+
+    if not _SPHERE_FIT:
+        _SPHERE_FIT.append(disk_jit(sphere_fit, "geometry.sphere_fit"))
+    c, r = _SPHERE_FIT[0](*pad_rows(np.asarray(x, float)))
+    return np.asarray(c), float(r)
+
+
+_SPHERE_FIT: list = []
+
+
 def sphere_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Algebraic sphere fit from the moment matrix: |x|^2 = 2 c.x + d, d = r^2 - |c|^2.
 

@@ -40,8 +40,8 @@ from .calibration import FitStatusWarning, MagCalibration, ellipsoid_axes
 from .geometry import (
     ellipsoid_fit_constrained_moments,
     moments,
-    sphere_fit,
     sphere_fit_moments,
+    sphere_fit_points,
 )
 from .implicit import solve_implicit
 from .io.files import SensorLog
@@ -152,11 +152,19 @@ def fit_ellipsoid_normalized(
     return lm_solve(residual, p0, (x, w), weights=w, update_type=update_type, **options)
 
 
+def _fit_measured(x, w, *, solver: str, model: str, **options):
+    """The fit and what the host asks of it: centre, M, each sample's relative radial error
+    and the natural radius (computed here: eagerly they were dozens of dispatches per model)."""
+    res = fit_ellipsoid_normalized(x, w, solver=solver, model=model, **options)
+    c, M = unpack(res.params, model)
+    return res, c, M, radial_error(c, M, x), natural_radius(M)
+
+
 @functools.lru_cache(maxsize=64)
 def _compiled(solver: str, model: str, options: tuple):
     return disk_jit(
-        functools.partial(fit_ellipsoid_normalized, solver=solver, model=model, **dict(options)),
-        f"mag.fit_ellipsoid_normalized {solver} {model} {options!r}",
+        functools.partial(_fit_measured, solver=solver, model=model, **dict(options)),
+        f"mag.fit_measured {solver} {model} {options!r}",
     )
 
 
@@ -196,9 +204,12 @@ def _spread(x: np.ndarray) -> tuple[np.ndarray, float]:
     return mean, s
 
 
-def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple) -> LMResult:
+def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple):
+    """(LMResult, centre, M, relative radial errors (N,), natural radius) of the normalised
+    samples, centre and M as numpy."""
     xpad, wpad = pad_rows(xn)
-    return _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+    res, c, M, rel, radius = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+    return res, np.asarray(c), np.asarray(M), np.asarray(rel)[: len(xn)], float(radius)
 
 
 def calibrate_mag(
@@ -301,8 +312,8 @@ def calibrate_mag(
     mean, s = _spread(xv)
 
     xn = (xv - mean) / s
-    cs, _ = sphere_fit(jnp.asarray(xn), jnp.ones(len(xn)))
-    d = xn - np.asarray(cs)
+    cs, _ = sphere_fit_points(xn)
+    d = xn - cs
     dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
     _, min_eig, unseen = sphere_coverage(dirs)
     if min_eig < FLAT:
@@ -319,14 +330,12 @@ def calibrate_mag(
     # relative radial error |W (x - c)| / r - 1)
     fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float, float]] = {}
     for m in candidates:
-        res = _fit(xn, m, solver, opts)
-        c_n, M_n = unpack(res.params, m)
+        res, c_n, M_n, rel, radius = _fit(xn, m, solver, opts)
         # the BIC's radial error is in units of s, not relative to the fitted radius (which a
         # misfitting model lowers by growing: see quadric_residual)
-        rel = np.asarray(radial_error(c_n, M_n, jnp.asarray(xn)))
-        ms = float(np.mean((rel * float(natural_radius(M_n))) ** 2))
+        ms = float(np.mean((rel * radius) ** 2))
         bic = n * np.log(max(ms, 1e-300)) + N_PARAMS[m] * np.log(n)
-        fits[m] = (res, np.asarray(c_n), np.asarray(M_n), ms, bic, float(np.mean(rel**2)))
+        fits[m] = (res, c_n, M_n, ms, bic, float(np.mean(rel**2)))
     usable = {
         m: f
         for m, f in fits.items()
@@ -415,10 +424,8 @@ def calibrate_mag(
         """RMS radial error (percent of the data radius) of the full ellipsoid: whether the
         data lie on an ellipsoid shell at all, whatever model was asked for."""
         if "full" not in fits:
-            res_f = _fit(xn, "full", solver, opts)
-            c_f, M_f = unpack(res_f.params, "full")
-            e_f = np.asarray(radial_error(c_f, M_f, jnp.asarray(xn)) * natural_radius(M_f))
-            fits["full"] = (res_f, np.asarray(c_f), np.asarray(M_f), float(np.mean(e_f**2)), 0, 0)
+            res_f, c_f, M_f, rel_f, radius_f = _fit(xn, "full", solver, opts)
+            fits["full"] = (res_f, c_f, M_f, float(np.mean((rel_f * radius_f) ** 2)), 0, 0)
         return float(100 * np.sqrt(fits["full"][3]))
 
     status = _plausibility(
