@@ -167,3 +167,24 @@ def _unchecked_if_wrong_types(request):
         yield
     finally:
         jaxtyping.config.update("jaxtyping_disable", before)
+
+
+# The longest items first (seconds each on this 2-core machine, from --durations): started last,
+# notebook 05 alone (3-4 min) ran while the other worker sat idle at the end of the run. With
+# them first, pytest-xdist's work stealing spreads the short tests around them.
+_LONGEST_FIRST = (
+    "test_notebooks.py::test_notebook_runs[05_in_a_jax_pipeline.ipynb]",
+    "test_notebooks.py::test_notebook_runs[03_close_the_loop.ipynb]",
+    "test_readme_examples.py::test_python_blocks_run_as_written[docs/pipeline.md]",
+    "test_notebooks.py::test_notebook_runs[02_magnetometer_marg.ipynb]",
+    "test_notebooks.py::test_notebook_runs[07_fleet.ipynb]",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: k for k, name in enumerate(_LONGEST_FIRST)}
+
+    def key(item):
+        return rank.get(item.nodeid.removeprefix("tests/"), len(rank))
+
+    items.sort(key=key)  # stable: everything else keeps its order
