@@ -964,17 +964,14 @@ def diagnose_accel(
         d.notes.extend(det_notes)
         return d
     means = np.array([x[a:b].mean(0) for a, b in spans])
-    import jax.numpy as jnp
+    from ..accel import initial_guess_points
+    from ..geometry import sphere_fit_points
+    from ..models.accel import ALPHA_INDEX
 
-    from ..accel import initial_guess
-    from ..geometry import sphere_fit
-    from ..models.accel import alpha_matrix
-
-    c_s, r_s = sphere_fit(jnp.asarray(means), jnp.ones(m))
-    c0, k0 = np.asarray(c_s), float(r_s)
+    c0, k0 = sphere_fit_points(means)
     xn = (means - c0) / k0
-    p0 = np.asarray(initial_guess(jnp.asarray(xn), jnp.ones(m)))
-    theta0 = _theta_from_alpha(np.asarray(alpha_matrix(jnp.asarray(p0))), p0[6:9])
+    p0 = initial_guess_points(xn)
+    theta0 = _theta_from_alpha(p0[ALPHA_INDEX], p0[6:9])
     motion = np.array([np.linalg.norm(x[a:b].std(0)) for a, b in spans]) / k0
     tm = np.array([t[a:b].mean() for a, b in spans])
     tp = None if temp is None else np.array([np.nanmean(temp[a:b]) for a, b in spans])
