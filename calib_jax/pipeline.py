@@ -43,6 +43,7 @@ default for calibration (``jax_enable_x64``).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import equinox as eqx
@@ -295,8 +296,31 @@ def fit_accel(
     Fit
         Its ``params`` (:class:`AccelParams`) are differentiable in ``raw``, ``magnitude``
         and ``weights`` by the implicit function theorem. Jittable and vmappable (see
-        :func:`fit_batch`); one compile per (N, dtype, static options).
+        :func:`fit_batch`); one compile per (N, dtype, static options), also when called
+        eagerly (the fit is jitted inside).
     """
+    _check_magnitude(magnitude)
+    return _fit_accel(
+        raw,
+        magnitude,
+        weights,
+        update_type=update_type,
+        max_iter=max_iter,
+        absolute_sigma=absolute_sigma,
+    )
+
+
+def _check_magnitude(magnitude) -> None:
+    """The concrete check of :func:`_magnitude_ok`, before the jitted fit (which sees a
+    traced magnitude and can only mark the fit FAILED)."""
+    if not isinstance(magnitude, jax.core.Tracer) and jnp.ndim(magnitude) == 0:
+        _magnitude_ok(jnp.asarray(magnitude))  # a shape error is _prepare's to name
+
+
+# Jitted, so that an eager call compiles the fit as one program: run op by op, the docs'
+# pipeline example took 70 s, mostly compiling hundreds of single operations
+@functools.partial(jax.jit, static_argnames=("update_type", "max_iter", "absolute_sigma"))
+def _fit_accel(raw, magnitude, weights, *, update_type, max_iter, absolute_sigma) -> Fit:
     raw, g, w = _prepare(raw, magnitude, weights)
     g_ok = _magnitude_ok(g)
     m, s = _normalisation(raw, w)
@@ -347,6 +371,20 @@ def fit_mag(
     and ``weights``; jittable and vmappable. Needs a well-covered sphere of orientations (see
     :func:`calib_jax.calibrate_mag` for the coverage checks and the model choice).
     """
+    _check_magnitude(magnitude)
+    return _fit_mag(
+        raw,
+        magnitude,
+        weights,
+        model=model,
+        update_type=update_type,
+        max_iter=max_iter,
+        absolute_sigma=absolute_sigma,
+    )
+
+
+@functools.partial(jax.jit, static_argnames=("model", "update_type", "max_iter", "absolute_sigma"))
+def _fit_mag(raw, magnitude, weights, *, model, update_type, max_iter, absolute_sigma) -> Fit:
     raw, B, w = _prepare(raw, magnitude, weights)
     B_ok = _magnitude_ok(B)
     m, s = _normalisation(raw, w)
@@ -420,12 +458,22 @@ def attitude(
     fixed number of Gauss-Newton steps, from the TRIAD start). ``iterations`` must be static
     (``jax.jit(attitude, static_argnames="iterations")``): traced, the loop becomes a
     while_loop that reverse mode cannot differentiate."""
+    if isinstance(iterations, jax.core.Tracer):
+        return _attitude(params, acc_raw, mag_raw, dip_deg, iterations)
+    return _attitude_jit(params, acc_raw, mag_raw, dip_deg, iterations)
+
+
+def _attitude(params, acc_raw, mag_raw, dip_deg, iterations):
     a, m = params.apply(acc_raw, mag_raw)
     r_a, r_m = reference_vectors(dip_deg)
     r_a, r_m = r_a.astype(a.dtype), r_m.astype(a.dtype)
     return jax.vmap(lambda ai, mi: gauss_newton_quaternion(ai, mi, r_a, r_m, None, iterations)[0])(
         a, m
     )
+
+
+# jitted for eager calls, as the fits (one program instead of a compile per operation)
+_attitude_jit = jax.jit(_attitude, static_argnames="iterations")
 
 
 def euler_deg(quat: Float[Array, "... 4"]) -> Float[Array, "... 3"]:
@@ -487,6 +535,11 @@ def attitude_std(
     uncertainty (``covariance`` over ``ravel_pytree(params)[0]``), to first order. Wrap-around
     of yaw near +-180 deg is taken care of by differentiating the angle itself (smooth away
     from the gimbal lock at pitch +-90 deg, where roll and yaw are undefined)."""
+    return _attitude_std(params, covariance, acc_raw, mag_raw, dip_deg, iterations)
+
+
+@functools.partial(jax.jit, static_argnames="iterations")
+def _attitude_std(params, covariance, acc_raw, mag_raw, dip_deg, iterations):
     C = propagate(
         lambda p: euler_deg(attitude(p, acc_raw, mag_raw, dip_deg, iterations)), params, covariance
     )
