@@ -85,12 +85,7 @@ def initial_guess(x: jax.Array, w: jax.Array) -> jax.Array:
 def initial_guess_points(x: np.ndarray) -> np.ndarray:
     """:func:`initial_guess` of host points (N, 3), equal weights: padded to a power of two
     and compiled once per size, kept on disk (eagerly it took 2 s of a warm CLI call)."""
-    if not _INITIAL_GUESS:
-        _INITIAL_GUESS.append(disk_jit(initial_guess, "accel.initial_guess"))
-    return np.asarray(_INITIAL_GUESS[0](*pad_rows(np.asarray(x, float))))
-
-
-_INITIAL_GUESS: list = []
+    return np.asarray(_INITIAL_GUESS(*pad_rows(np.asarray(x, float))))
 
 
 def initial_guess_moments(S: jax.Array) -> jax.Array:
@@ -104,6 +99,9 @@ def initial_guess_moments(S: jax.Array) -> jax.Array:
     p_sph = jnp.concatenate([jnp.full(3, r), jnp.zeros(3, S.dtype), cs])
     use_ell = ok & jnp.all(jnp.isfinite(p_ell))
     return jnp.where(use_ell, p_ell, p_sph)
+
+
+_INITIAL_GUESS = disk_jit(initial_guess, "accel.initial_guess")
 
 
 MODELS = {

@@ -7,6 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .linalg import cho_solve_small, eigh_small, inv3
+from .padding import pad_rows
+from .runtime import disk_jit
 
 
 def monomials(x: jax.Array) -> jax.Array:
@@ -56,16 +58,8 @@ def sphere_fit_points(x: np.ndarray) -> tuple[np.ndarray, float]:
     compiled once per size (kept on disk, :class:`calib_jax.runtime.DiskJit`). For the
     host-side checks of the single fits; eager, its few dozen operations each cost a dispatch.
     """
-    from .padding import pad_rows
-    from .runtime import disk_jit
-
-    if not _SPHERE_FIT:
-        _SPHERE_FIT.append(disk_jit(sphere_fit, "geometry.sphere_fit"))
-    c, r = _SPHERE_FIT[0](*pad_rows(np.asarray(x, float)))
+    c, r = _SPHERE_FIT(*pad_rows(np.asarray(x, float)))
     return np.asarray(c), float(r)
-
-
-_SPHERE_FIT: list = []
 
 
 def sphere_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -80,6 +74,9 @@ def sphere_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array]:
     sol = cho_solve_small(AtA, Atb)
     c, d = sol[:3], sol[3]
     return c, jnp.sqrt(jnp.maximum(d + c @ c, 0.0))
+
+
+_SPHERE_FIT = disk_jit(sphere_fit, "geometry.sphere_fit")
 
 
 def ellipsoid_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
