@@ -21,7 +21,7 @@ import warnings
 from pathlib import Path
 
 _OFF = ("", "0", "off", "false", "no", "none")
-_AOT_DIR: list[Path] = []  # where DiskJit keeps executables: set by configure()
+_AOT_DIR: list[Path] = []  # where DiskJit keeps exported programs: set by configure()
 ENV = "CALIB_JAX_CACHE_DIR"
 
 
@@ -93,6 +93,7 @@ class DiskJit:
         self.key = key
         self.jitted = jax.jit(fun)
         self._loaded: dict[str, object] = {}
+        self._refused: set[str] = set()  # digests that failed once: plain jit, no retry
 
     def __call__(self, *args):
         import jax
@@ -100,15 +101,19 @@ class DiskJit:
         leaves, in_tree = jax.tree_util.tree_flatten(args)
         if not _AOT_DIR or any(isinstance(x, jax.core.Tracer) for x in leaves):
             return self.jitted(*args)
+        digest = None
         try:
             leaves = [jax.numpy.asarray(x) for x in leaves]
             digest = self._digest(leaves, in_tree)
+            if digest in self._refused:
+                return self.jitted(*args)
             exported = self._loaded.get(digest) or self._load_or_export(
                 _AOT_DIR[0] / f"{digest}.jaxexport", leaves, in_tree
             )
             self._loaded[digest] = exported
             return _unplain(exported.call(*leaves))
         except Exception as exc:  # noqa: BLE001 - the disk is an optimisation, never a failure
+            self._refused.add(digest)  # say it once; later calls go straight to jax.jit
             warnings.warn(f"compiled-fit cache skipped ({type(exc).__name__}: {exc})", stacklevel=2)
             return self.jitted(*args)
 
