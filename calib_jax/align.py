@@ -95,6 +95,16 @@ class PlaneAlignment:
     message: str
     warnings: list[str] = field(default_factory=list)
 
+    def to_dict(self) -> dict:
+        """JSON-ready fields (arrays as lists; a MARG record keeps its plane alignments so)."""
+        d = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> PlaneAlignment:
+        arrays = ("matrix", "normal", "plane")
+        return cls(**{k: np.array(v, float) if k in arrays else v for k, v in d.items()})
+
 
 def _align_from_normal(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     eps = np.asarray(alignment_angles(jnp.asarray(n)))

@@ -14,8 +14,8 @@ and pitch deviation from the ideal 0 (relative to the starting pose).
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
-import json
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,53 +32,11 @@ from .calibration import (
     MagCalibration,
     _read_json,
     _sanitize,
+    _unsanitize,
+    write_json_atomic,
 )
 from .mag import calibrate_mag
 from .status import is_usable, worst_status
-
-
-@dataclass(frozen=True)
-class MARGCalibration:
-    """Ellipsoid calibrations, plane alignments and the accel-mag rotation of one board."""
-
-    mag: MagCalibration
-    acc: MagCalibration | None
-    """Paper 2 compensates every sensor with its ellipsoid; None leaves the accelerometer as
-    given (e.g. already calibrated with paper 1's model)."""
-    acc_plane: PlaneAlignment | None
-    mag_plane: PlaneAlignment | None
-    mag_to_acc: MagAccelAlignment | None
-    warnings: list[str] = field(default_factory=list)
-
-    def compensate(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Ellipsoid compensation only (paper 2 'compensated data'), unit radius."""
-        a = np.asarray(acc, float) if self.acc is None else self.acc.apply(acc) / self.acc.radius
-        return a, self.mag.apply(mag) / self.mag.radius
-
-    def plane_aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Compensated, then each sensor multiplied by its alignment matrix (paper 2)."""
-        a, m = self.compensate(acc, mag)
-        if self.acc_plane is not None:
-            a = a @ self.acc_plane.matrix.T
-        if self.mag_plane is not None:
-            m = m @ self.mag_plane.matrix.T
-        return a, m
-
-    def rotation_aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Compensated, magnetometer rotated into the accelerometer frame (beyond the paper)."""
-        a, m = self.compensate(acc, mag)
-        if self.mag_to_acc is not None:
-            m = self.mag_to_acc.apply(m)
-        return a, m
-
-    def aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Both: the magnetometer rotated into the accelerometer frame (3 degrees of freedom
-        from the dip constancy), then both sensors by the accelerometer's plane alignment
-        (its tilt against the board). The most complete correction here."""
-        a, m = self.rotation_aligned(acc, mag)
-        if self.acc_plane is not None:
-            a, m = a @ self.acc_plane.matrix.T, m @ self.acc_plane.matrix.T
-        return a, m
 
 
 def calibrate_marg(
@@ -90,8 +48,12 @@ def calibrate_marg(
     acc_ellipsoid: bool = True,
     mag_model: str = "auto",
     acc_model: str = "full",
-) -> MARGCalibration:
+) -> MARGRecord:
     """Paper 2's calibration and compensation, sensor-plane alignment, and the accel-mag rotation.
+
+    Returns the same :class:`MARGRecord` as ``calib-jax marg`` (``accel_method`` "ellipsoid",
+    or "none" with ``acc_ellipsoid=False``), with the two plane alignments when a turn is given;
+    it saves, loads and compares like every calibration record.
 
     Parameters
     ----------
@@ -107,18 +69,18 @@ def calibrate_marg(
     warn: list[str] = []
     mag = calibrate_mag(tumble_mag, model=mag_model)
     acc = calibrate_mag(tumble_acc, model=acc_model, sensor="accel") if acc_ellipsoid else None
-    partial = MARGCalibration(mag, acc, None, None, None)
-    a_t, m_t = partial.compensate(tumble_acc, tumble_mag)
-    rot = align_mag_to_accel(a_t, m_t)
-    warn += rot.warnings
-    acc_plane = mag_plane = None
-    if turn_acc is not None and turn_mag is not None:
-        a_p, m_p = partial.compensate(turn_acc, turn_mag)
-        acc_plane, mag_plane = plane_alignment(a_p), plane_alignment(m_p)
-        for name, pa in (("accelerometer", acc_plane), ("magnetometer", mag_plane)):
-            if not pa.is_rotation:
-                warn.append(f"{name} plane alignment: {pa.message}")
-    return MARGCalibration(mag, acc, acc_plane, mag_plane, rot, warn)
+    a_t = np.asarray(tumble_acc, float) if acc is None else acc.apply(tumble_acc)
+    rot = align_mag_to_accel(a_t, mag.apply(tumble_mag))
+    warn += [f"alignment: {w}" for w in rot.warnings]
+    record = _record(acc, "none" if acc is None else "ellipsoid", mag, rot, warn)
+    if turn_acc is None or turn_mag is None:
+        return record
+    a_p, m_p = record.compensate(turn_acc, turn_mag)
+    acc_plane, mag_plane = plane_alignment(a_p), plane_alignment(m_p)
+    for name, pa in (("accelerometer", acc_plane), ("magnetometer", mag_plane)):
+        if not pa.is_rotation:
+            warn.append(f"{name} plane alignment: {pa.message}")
+    return dataclasses.replace(record, acc_plane=acc_plane, mag_plane=mag_plane, warnings=warn)
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -186,7 +148,8 @@ def evaluation_table(ev: dict[str, TurnEvaluation]) -> str:
 # ---------------------------------------------------------------------------------------------
 # one log -> one record (calib-jax marg)
 
-MARG_FORMAT_VERSION = 1
+MARG_FORMAT_VERSION = 2
+"""2 adds the plane alignments (``plane_alignment``); version 1 files still load."""
 ACCEL_METHODS = ("auto", "static", "ellipsoid", "none")
 
 
@@ -227,6 +190,9 @@ class MARGRecord:
     warnings: list[str] = field(default_factory=list)
     source: str | None = None
     date: str = ""
+    acc_plane: PlaneAlignment | None = None
+    """Paper 2's sensor-plane alignment of the accelerometer (from a turn log), or None."""
+    mag_plane: PlaneAlignment | None = None
     format_version: int = MARG_FORMAT_VERSION
 
     @property
@@ -267,6 +233,43 @@ class MARGRecord:
             return MargParams(acc, mag, Rotation(jnp.asarray(_R.from_matrix(R).as_rotvec())))
         folded = MagParams(mag.hard_iron, jnp.asarray(R @ np.asarray(mag.soft_iron)))
         return MargParams(acc, folded, Rotation.identity())
+
+    # ---- applying it (paper 2's compensation and alignments) -------------------------------
+    def compensate(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each sensor calibrated and scaled to unit length (paper 2's 'compensated data'):
+        the ellipsoids divided by their radius, paper 1's model by g, "none" as given."""
+        if isinstance(self.accel, MagCalibration):
+            a = self.accel.apply(acc) / self.accel.radius
+        elif isinstance(self.accel, AccelCalibration):
+            a = self.accel.apply(acc) / self.accel.g
+        else:
+            a = np.asarray(acc, float)
+        return a, self.mag.apply(mag) / self.mag.radius
+
+    def plane_aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Compensated, then each sensor multiplied by its plane alignment (paper 2); a sensor
+        without one stays compensated."""
+        a, m = self.compensate(acc, mag)
+        if self.acc_plane is not None:
+            a = a @ self.acc_plane.matrix.T
+        if self.mag_plane is not None:
+            m = m @ self.mag_plane.matrix.T
+        return a, m
+
+    def rotation_aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Compensated, the magnetometer rotated into the accelerometer frame (beyond the
+        paper)."""
+        a, m = self.compensate(acc, mag)
+        return a, m @ np.asarray(self.R_mag_to_acc).T
+
+    def aligned(self, acc: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Both: the magnetometer rotated into the accelerometer frame (3 degrees of freedom
+        from the dip constancy), then both sensors by the accelerometer's plane alignment
+        (its tilt against the board). The most complete correction here."""
+        a, m = self.rotation_aligned(acc, mag)
+        if self.acc_plane is not None:
+            a, m = a @ self.acc_plane.matrix.T, m @ self.acc_plane.matrix.T
+        return a, m
 
     def alignment_text(self) -> str:
         """One line on the accel-mag rotation (the demo's wording)."""
@@ -317,12 +320,16 @@ class MARGRecord:
                 "accel_method": self.accel_method,
                 "accel": None if self.accel is None else self.accel.to_dict(),
                 "mag": self.mag.to_dict(),
+                "plane_alignment": {
+                    name: None if pa is None else pa.to_dict()
+                    for name, pa in (("accel", self.acc_plane), ("mag", self.mag_plane))
+                },
                 "warnings": list(self.warnings),
             }
         )
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        write_json_atomic(path, self.to_dict())
 
     @classmethod
     def from_dict(cls, d: dict) -> MARGRecord:
@@ -331,11 +338,15 @@ class MARGRecord:
                 f"not a MARG calibration (kind {d.get('kind')!r}); load accelerometer files "
                 "with AccelCalibration.load and ellipsoid files with MagCalibration.load"
             )
-        if d.get("format_version") != MARG_FORMAT_VERSION:
+        if d.get("format_version") not in (1, MARG_FORMAT_VERSION):  # 1: no plane alignment
             raise ValueError(
                 f"MARG format_version {d.get('format_version')!r} is not supported (this "
-                f"calib_jax reads version {MARG_FORMAT_VERSION})"
+                f"calib_jax reads versions 1 to {MARG_FORMAT_VERSION})"
             )
+        planes = {
+            k: None if v is None else PlaneAlignment.from_dict(_unsanitize(v))
+            for k, v in d.get("plane_alignment", {"accel": None, "mag": None}).items()
+        }
         a = d.get("accel")
         if a is None:
             accel = None
@@ -363,6 +374,8 @@ class MARGRecord:
             warnings=list(d.get("warnings", [])),
             source=d.get("source"),
             date=d.get("date", ""),
+            acc_plane=planes["accel"],
+            mag_plane=planes["mag"],
         )
 
     @classmethod
@@ -480,8 +493,20 @@ def calibrate_marg_log(
         raise ValueError(
             f"{exc}. The magnetometer's ellipsoid fit is '{mcal.status}' too: {why}"
         ) from exc
-    statuses = [mcal.status, al.status] + ([] if acal is None else [acal.status])
     warn += [f"alignment: {w}" for w in al.warnings]
+    return _record(acal, method, mcal, al, warn, source=log.path)
+
+
+def _record(
+    acal: AccelCalibration | MagCalibration | None,
+    method: str,
+    mcal: MagCalibration,
+    al: MagAccelAlignment,
+    warn: list[str],
+    source: str | None = None,
+) -> MARGRecord:
+    """The MARG record of a board's fits and its accel-mag rotation (every path builds it so)."""
+    statuses = [mcal.status, al.status] + ([] if acal is None else [acal.status])
     return MARGRecord(
         accel=acal,
         accel_method=method,
@@ -500,6 +525,6 @@ def calibrate_marg_log(
         alignment_message=al.message,
         status=worst_status(*statuses),
         warnings=warn,
-        source=log.path,
+        source=source,
         date=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     )

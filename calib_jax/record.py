@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import BatchRecord, write_json_atomic
+from .calibration import BatchRecord
 from .io.serial import Batch, SerialReader, log_columns
 from .observations import detector_keywords
 from .static import detect_static, distinct_directions
@@ -249,7 +249,7 @@ def calibration_paths(log: str | Path, sensor: str) -> dict[str, Path]:
         return {
             "accel": log.with_suffix(".accel.calib.json"),
             "mag": log.with_suffix(".mag.calib.json"),
-            "align": log.with_suffix(".align.json"),
+            "marg": log.with_suffix(".marg.json"),
         }
     return {sensor: log.with_suffix(".calib.json")}
 
@@ -478,7 +478,8 @@ def calibrate_recording(
 
     ``accel``: :class:`calib_jax.AccelCalibration`; ``mag``: :class:`calib_jax.MagCalibration`;
     ``marg``: both and, when the data allow it, the magnetometer-to-accelerometer rotation
-    (:func:`calib_jax.align_mag_to_accel`, written as ``.align.json``).
+    (:func:`calib_jax.align_mag_to_accel`), written as ``.marg.json``: the board's
+    :class:`calib_jax.marg.MARGRecord`, as ``calib-jax marg`` writes it).
     """
     from .accel import calibrate_accel
     from .io.files import load_log
@@ -512,30 +513,18 @@ def calibrate_recording(
         results["mag"] = mcal
     if sensor == "marg":
         from .align import align_mag_to_accel
+        from .marg import _record
 
         try:
             al = align_mag_to_accel(results["accel"].apply(log.acc), results["mag"].apply(log.mag))
         except ValueError as exc:
             say(f"no accel-mag rotation: {exc}")
         else:
-            d = {
-                "format_version": 1,
-                "R_acc_from_mag": al.R_acc_from_mag.tolist(),
-                "axes": al.permutation_text,
-                "rotation_deg": al.rotation_deg,
-                "dip_deg": al.dip_deg,
-                "dip_stderr_deg": al.dip_stderr_deg,
-                "status": al.status,
-                "message": al.message,
-                "n_used": al.n_used,
-                "source": str(path),
-            }
-            wrote = _save(lambda: write_json_atomic(out["align"], d), out["align"], errors)
-            say(
-                f"accel-mag rotation: axes {al.permutation_text}, {al.rotation_deg:.2f} deg, "
-                f"dip {al.dip_deg:.2f} deg ({al.message}){wrote}"
-            )
-            results["align"] = al
+            warn = [f"alignment: {w}" for w in al.warnings]
+            rec = _record(results["accel"], "static", results["mag"], al, warn, source=str(path))
+            wrote = _save(lambda: rec.save(out["marg"]), out["marg"], errors)
+            say(rec.alignment_text() + wrote)
+            results["marg"] = rec
     if errors:
         results["save_errors"] = errors
     return results

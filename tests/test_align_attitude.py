@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from calib_jax.align import align_mag_to_accel, alignment_matrix, plane_alignment
 from calib_jax.attitude import estimate_attitude, gauss_newton_quaternion, reference_vectors
-from calib_jax.marg import calibrate_marg, evaluate_turn
+from calib_jax.marg import MARGRecord, calibrate_marg, evaluate_turn
 from calib_jax.rotations import (
     dcm_to_quat,
     euler_zyx_deg,
@@ -244,7 +244,7 @@ def test_accel_mag_needs_orientation_diversity():
 # paper 2's evaluation on simulation
 
 
-def test_paper2_pipeline_reproduces_table1_ordering():
+def test_paper2_pipeline_reproduces_table1_ordering(tmp_path):
     """Paper 2, Table 1 and Fig. 9: raw > compensated > aligned-compensated in mean F(x), each
     step by about an order of magnitude or more, and roll/pitch deviations near 0 after
     alignment (the paper reports a mean of about 0.32 deg). Measured here: F 6.7e-3, 7.5e-4,
@@ -278,3 +278,15 @@ def test_paper2_pipeline_reproduces_table1_ordering():
     for k in ("roll_rms_deg", "pitch_rms_deg"):
         assert getattr(ev["aligned"], k) < 0.5 < getattr(ev["raw"], k)
     assert ev["aligned"].yaw_span_deg == pytest.approx(1.2 * 360, abs=5)
+    # the routine's result is the one MARG record (issue 14: it could not be saved before)
+    assert cal.accel_method == "ellipsoid" and cal.acc_plane.is_rotation
+    cal.save(tmp_path / "marg.json")
+    assert MARGRecord.load(tmp_path / "marg.json") == cal
+    np.testing.assert_array_equal(
+        MARGRecord.load(tmp_path / "marg.json").plane_aligned(a, m)[1], cal.plane_aligned(a, m)[1]
+    )
+    # a version-1 file (before the plane alignments were kept) still loads, without them
+    d = cal.to_dict()
+    del d["plane_alignment"]
+    old = MARGRecord.from_dict({**d, "format_version": 1})
+    assert old.acc_plane is None and old.mag == cal.mag

@@ -78,7 +78,7 @@ def test_file_names():
     assert names == {
         "accel": "s.dev1.accel.calib.json",
         "mag": "s.dev1.mag.calib.json",
-        "align": "s.dev1.align.json",
+        "marg": "s.dev1.marg.json",
     }
 
 
@@ -295,6 +295,25 @@ def test_batch_of_marg_logs(tmp_path):
 
         corr = export.read(p.with_suffix(".mag.calib.json"))["mag"]
         np.testing.assert_array_equal(corr.bias, r["mag"]["params"][:3])
+
+
+def test_one_marg_log_gets_the_marg_record(tmp_path):
+    """A single ``--sensor marg`` log: the accelerometer and magnetometer JSON, and the board's
+    MARG record as ``calib-jax marg`` writes it (kind 'marg', not a free-form alignment dict
+    as before issue 14). The simulated board has no mounting rotation, a 60 deg dip and
+    0.2 uT noise: the dip within 0.5 deg and the rotation within 1 deg of the identity."""
+    from calib_jax.marg import MARGRecord
+    from calib_jax.record import calibrate_recording
+
+    s = simulate_session(poses=24, hold=1.0, move=0.3, rate=100.0, seed=3)
+    path = tmp_path / "m.csv"
+    _write_log(path, s, ("t", "ax", "ay", "az", "mx", "my", "mz"))
+    res = calibrate_recording(path, "marg", field=45.0, echo=None, **DETECT)
+    rec = res["marg"]
+    assert rec.status == "ok" and rec.accel_method == "static"
+    assert rec == MARGRecord.load(path.with_suffix(".marg.json"))
+    assert rec.accel == cj.AccelCalibration.load(path.with_suffix(".accel.calib.json"))
+    assert abs(rec.dip_deg - 60.0) < 0.5 and rec.rotation_deg < 1.0
 
 
 def test_batch_path_checks_g_against_the_unit(tmp_path):
