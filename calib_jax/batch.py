@@ -39,7 +39,7 @@ from .accel import _units_from_norm, initial_guess_moments
 from .calibration import BatchRecord
 from .geometry import moments
 from .linalg import cholesky_small, eigh_small, inv3
-from .lm import LMResult, lm_solve
+from .lm import lm_solve
 from .mag import ellipsoid_start_moments
 from .models.accel import alpha_matrix
 from .models.mag import (
@@ -305,15 +305,6 @@ def _solve(theta_fn, p0, S, dof, solver, options):
         return optx_solve(residual, p0, Lt, dof=dof, **options)
     update_type = {"lm1": 1, "lm2": 2, "lm3": 3}[solver]
     return lm_solve(residual, p0, Lt, update_type=update_type, dof=dof, **options)
-
-
-def _nan_result(res: LMResult, bad: jax.Array) -> LMResult:
-    nan = jnp.nan
-    return eqx.tree_at(
-        lambda r: (r.params, r.stderr),
-        res,
-        (jnp.where(bad, nan, res.params), jnp.where(bad, nan, res.stderr)),
-    )
 
 
 def _accel_one(S, mean, k, g, model, solver, options, min_points):

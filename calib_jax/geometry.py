@@ -11,20 +11,11 @@ from .padding import pad_rows
 from .runtime import disk_jit
 
 
-def monomials(x: jax.Array) -> jax.Array:
-    """phi(x) = [x^2, y^2, z^2, 2xy, 2xz, 2yz, x, y, z, 1] for samples (..., 3) -> (..., 10).
-
-    Every sphere and quadric residual here is linear in phi, so all the fits below (and the
-    batch LM of :mod:`calib_jax.batch`) need only the moment matrix of phi.
-    """
-    X, Y, Z = x[..., 0], x[..., 1], x[..., 2]
-    return jnp.stack(
-        [X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, X, Y, Z, jnp.ones_like(X)], -1
-    )
-
-
 def moments(x: jax.Array, w: jax.Array) -> jax.Array:
-    """S = sum_i w_i phi(x_i) phi(x_i)' (10 x 10) for samples x (N, 3), weights w (N,).
+    """S = sum_i w_i phi(x_i) phi(x_i)' (10 x 10) for samples x (N, 3), weights w (N,), with
+    the monomials phi(x) = [x^2, y^2, z^2, 2xy, 2xz, 2yz, x, y, z, 1]. Every sphere and
+    quadric residual here is linear in phi, so the fits below (and the batch LM of
+    :mod:`calib_jax.batch`) need only S.
 
     S holds only 35 distinct power sums (degree <= 4), so it is assembled from the 6 x 10
     product A = sum_i w_i q_i [q_i, x_i, 1]' with q = [x^2, y^2, z^2, xy, xz, yz]: 60 products
@@ -77,11 +68,6 @@ def sphere_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array]:
 
 
 _SPHERE_FIT = disk_jit(sphere_fit, "geometry.sphere_fit")
-
-
-def ellipsoid_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Weighted algebraic ellipsoid fit, see :func:`ellipsoid_fit_moments`."""
-    return ellipsoid_fit_moments(moments(x, w))
 
 
 def ellipsoid_fit_moments(S: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:

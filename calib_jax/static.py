@@ -417,16 +417,6 @@ def _moving_variance(c1: np.ndarray, c2: np.ndarray, cn: np.ndarray, window: int
     return out
 
 
-def moving_variance(x: np.ndarray, window: int) -> np.ndarray:
-    """Sum over axes of the per-axis variance in a centred window of ``window`` samples.
-
-    Edges use the part of the window inside the log. Computed with cumulative sums of the
-    mean-removed data (O(N), numerically safe for raw counts near 32768).
-    """
-    _, c1, c2, cn = _cumsums(np.asarray(x, float))
-    return _moving_variance(c1, c2, cn, window)
-
-
 def _noise_level(mv: np.ndarray) -> float:
     mv = mv[np.isfinite(mv)]
     if mv.size == 0:

@@ -15,6 +15,7 @@ from calib_jax.geometry import (
     compensation_matrix,
     ellipsoid_fit_constrained,
     ellipsoid_from_quadric,
+    moments,
     quadric_matrix,
 )
 from calib_jax.lm import is_converged
@@ -326,3 +327,15 @@ def test_full_ellipsoid_matches_paper1_on_accelerometer(sim48):
     np.testing.assert_allclose(ell.center, acc.bias, atol=3 * acc.stderr[6:9].max())
     np.testing.assert_allclose(ell.soft_iron, np.linalg.inv(alpha), atol=3 * acc.stderr[:6].max())
     assert ell.rms_after_pct / 100 == pytest.approx(acc.rms_after, rel=0.05)
+
+
+def test_moments_are_the_weighted_monomial_products():
+    """geometry.moments assembles S from 35 power sums; against the definition
+    S = sum w phi phi' with phi = [x^2, y^2, z^2, 2xy, 2xz, 2yz, x, y, z, 1] written out here.
+    Both sum the same O(1)-scaled products: 1e-12 relative."""
+    rng = np.random.default_rng(0)
+    x, w = rng.normal(size=(200, 3)), rng.uniform(0.5, 2.0, 200)
+    X, Y, Z = x.T
+    phi = np.stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, X, Y, Z, 1 + 0 * X], 1)
+    S = np.asarray(moments(jnp.asarray(x), jnp.asarray(w)))
+    np.testing.assert_allclose(S, (phi * w[:, None]).T @ phi, rtol=1e-12, atol=1e-12 * w.sum())

@@ -33,15 +33,6 @@ def allan_deviation(y: np.ndarray, n: int) -> float:
     return float(np.sqrt(0.5 * np.mean(d * d)))
 
 
-def allan_curve(y: np.ndarray, max_points: int = 30) -> tuple[np.ndarray, np.ndarray]:
-    """(cluster sizes, Allan deviations) on a log grid up to N / 2, for the report."""
-    N = len(y)
-    if N < 4:
-        return np.array([], int), np.array([])
-    ns = np.unique(np.round(np.logspace(0, np.log10(N // 2), max_points)).astype(int))
-    return ns, np.array([allan_deviation(y, n) for n in ns])
-
-
 def white_floor(norms: list[np.ndarray]) -> float:
     """RMS over intervals of std(|y|) / sqrt(n): the white-noise error of interval means."""
     se = [np.std(v, ddof=1) / np.sqrt(len(v)) for v in norms if len(v) > 1]

@@ -162,15 +162,3 @@ def fit_many(theta0, x, tau, temp, w, free, max_iter: int = 100):
     fitted residual divided by the fitted radius, about 1).
     """
     return fit_each(_compiled_fit(int(max_iter)), theta0, x, tau, temp, w, free)
-
-
-@functools.lru_cache(maxsize=1)
-def _compiled_calibrated():
-    return jax.jit(jax.vmap(calibrated, in_axes=(None, None, 0, 0, 0)))
-
-
-def calibrated_many(theta, free, x, tau, temp) -> np.ndarray:
-    """:func:`calibrated` for every observation (host arrays in, numpy out)."""
-    return np.asarray(
-        _compiled_calibrated()(*(jnp.asarray(a) for a in (theta, free, x, tau, temp)))
-    )

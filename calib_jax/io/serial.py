@@ -257,16 +257,6 @@ class Batch:
             columns=batches[0].columns,
         )
 
-    def as_dict(self) -> dict[str, np.ndarray]:
-        """{canonical column: (n,) array}, e.g. ``{'t': ..., 'ax': ..., ...}``."""
-        out = {"t": self.t}
-        for p, arr in (("a", self.acc), ("g", self.gyro), ("m", self.mag)):
-            if arr is not None:
-                out.update({p + x: arr[:, i] for i, x in enumerate("xyz")})
-        if self.temp is not None:
-            out["temp"] = self.temp
-        return out
-
 
 @dataclass
 class ReaderStats:
@@ -593,7 +583,6 @@ class SerialReader:
         self.baudrate = int(baudrate)
         self._delim = _DELIMS[delimiter]
         self._layout, self._renames = parse_layout(columns)
-        self._explicit = self._layout is not None
         self._scale = parse_scale(scale)
         self.timeout = float(timeout)
         self.batch_seconds = float(batch_seconds)

@@ -101,9 +101,3 @@ def normalized_sphere_residual(
     """
     a = correct(p, raw) / g
     return 1.0 - jnp.sum(a * a, axis=-1)
-
-
-def norm_error(p: Float[Array, "9"], raw: Float[Array, "N 3"], g) -> Float[Array, " N"]:
-    """(|a| - g) / g for each corrected sample: the error the JSON's rms fields summarise."""
-    a = correct(p, raw)
-    return jnp.linalg.norm(a, axis=-1) / g - 1.0
