@@ -7,7 +7,8 @@ rest imu_tk logs start with), joined by short moves (:func:`calib_jax.simulate.p
 a random nine-parameter base calibration (:func:`calib_jax.simulate.random_params`), white
 noise, and any of the effects below added in the same form :mod:`calib_jax.diagnose.model`
 fits them.
-Magnetometer: a slow random tumble of ``samples`` samples after a rest, on a random ellipsoid.
+Magnetometer: a rest, then :func:`calib_jax.simulate.tumble_quaternions`'s smooth tumble, on a
+random ellipsoid; ``samples`` samples in all.
 
 Effects (all sizes in units of g or of the field):
 
@@ -28,8 +29,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from ..simulate import alpha_beta, pose_path, random_directions, random_params
+from ..simulate import alpha_beta, pose_path, random_directions, random_params, tumble_quaternions
 
 DIRS = np.array([1.0, -0.7, 0.5])
 
@@ -125,18 +127,13 @@ def simulate_mag_log(
     alpha, b = _random_base(rng)
     if "soft_iron" in effects:
         alpha = alpha + np.diag(size * np.array([3.0, -2.0, 1.0]))
-    # smooth random tumble: integrate a slowly varying rotation rate
+    # the field's direction in the sensor frame: a rest, then the simulator's smooth tumble
+    # (slerp between random attitudes, one knot every 4 s)
     n = samples
-    w = np.cumsum(rng.normal(size=(n, 3)), axis=0)
-    w = w - np.linspace(0, 1, n)[:, None] * w[-1]
-    w = 2.0 * w / np.abs(w).max()  # rad/s
-    w[:rest] = 0.0
-    v = np.empty((n, 3))
-    v[0] = rng.normal(size=3)
-    v[0] /= np.linalg.norm(v[0])
-    for i in range(1, n):
-        v[i] = v[i - 1] + np.cross(w[i], v[i - 1]) / rate
-        v[i] /= np.linalg.norm(v[i])
+    quat = tumble_quaternions(n - rest, rng, knots=max(int((n - rest) / rate / 4.0), 2) + 1)
+    C = Rotation.from_quat(np.roll(quat, -1, axis=1)).as_matrix()  # body -> nav, (w,x,y,z) in
+    h = random_directions(1, rng)[0]
+    v = np.concatenate([np.repeat(C[:1], rest, axis=0), C]).transpose(0, 2, 1) @ h  # C' h
     t = np.arange(n) / rate
     tau, temp, T = _drivers(t, rng)
     x, _ = _apply(
