@@ -82,6 +82,9 @@ def test_accel_effect_is_found_and_brings_the_residual_to_the_floor(effect):
     assert d.rms_after <= 1.5 * d.noise_floor, d.summary()
     assert not d.unexplained_structure
     assert [st["added_effect"] for st in d.steps] == [None, effect]
+    # "before" and "after" are the steps table's first and last rows (issue 14 defect: before
+    # was the base fit on the observations left after rejecting outliers)
+    assert (d.rms_before, d.rms_after) == (d.steps[0]["rms"], d.steps[-1]["rms"])
     if effect == "scale_nonlinearity":
         # q recovered: the simulator reads y = a + size * (0.6, -1, 0.8) a^2; the model corrects
         # a = y - q y^2 in normalised units (gains ~ 1 +- 5 %), so q ~ size * (0.6, -1, 0.8)

@@ -757,9 +757,10 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     )
     fin, base = res["final"], res["base"]
     w = res["w"]
-    act = w > 0
-    rms_before = float(np.sqrt(np.mean(base["e"][act] ** 2)))
-    rms_after = float(np.sqrt(np.mean(fin["e"][act] ** 2)))
+    # before and after are the first and last steps' rms, as the steps table shows them: the
+    # base model on every observation, the final one on those kept (outliers rejected). Before
+    # issue 14 "before" was the base fit's residual on the kept observations only.
+    rms_before, rms_after = res["steps"][0]["rms"], res["steps"][-1]["rms"]
     notes = list(obs.notes)
     structure = _structure(obs, fin["e"], w, fin["theta"], res["free"], floor)
     drivers_above = [s for s in structure if s["above_floor"]]
