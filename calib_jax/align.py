@@ -24,10 +24,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .lm import is_converged, lm_solve, status_message
+from .lm import lm_solve, status_message
 from .padding import pad_rows
 from .rotations import describe_permutation, rotation_angle_deg, rotvec_to_dcm, signed_permutations
 from .runtime import disk_jit
+from .status import fit_status
 
 # ---------------------------------------------------------------------------------------------
 # sensor plane alignment: pure parts
@@ -367,7 +368,7 @@ def align_mag_to_accel(
     a, m = a[:n], m[:n]
     before = _angles_deg(a, m)
     after = _angles_deg(a, m @ R.T)
-    status = "ok" if is_converged(int(res.status)) else "not_converged"
+    status = fit_status(int(res.status), usable=bool(np.all(np.isfinite(p))))
     if status == "ok" and np.any(np.degrees(se[:3]) > 1.0):
         status = "poorly_determined"
         warn.append(

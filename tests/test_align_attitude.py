@@ -234,6 +234,30 @@ def test_accel_mag_detects_swapped_axes(tumble, k):
     assert any("permuted" in w for w in al.warnings)
 
 
+def test_accel_mag_status_words_are_the_shared_ones(tumble, monkeypatch):
+    """The rotation's status comes from calib_jax.status.fit_status like every fit's: a solve
+    that stops singular is 'failed' (align.py had its own rule, which called it
+    'not_converged'), a run-out budget 'not_converged'."""
+    import types
+
+    import calib_jax.align as align
+    from calib_jax.status import Status
+
+    m = (tumble.mag - tumble.center) @ tumble.soft_iron.T
+    real = align._compiled_dip
+    for code, word in ((Status.SINGULAR, "failed"), (Status.MAX_ITERATIONS, "not_converged")):
+
+        def stopped(max_iter, code=code):
+            def solve(*args):
+                r = real(max_iter)(*args)
+                return types.SimpleNamespace(params=r.params, stderr=r.stderr, status=int(code))
+
+            return solve
+
+        monkeypatch.setattr(align, "_compiled_dip", stopped)
+        assert align_mag_to_accel(tumble.acc, m).status == word
+
+
 def test_accel_mag_needs_orientation_diversity():
     sim = simulate_marg(plane_turn_quaternions(600, incline_deg=0), rng=0)
     with pytest.raises(ValueError, match="unobservable"):
