@@ -40,6 +40,9 @@ class AccelCalibration:
     by the poses: see ``poorly_determined`` and ``warnings``), "not_converged" or "failed".
     """
 
+    kind: ClassVar[str] = "accel"
+    """The JSON's ``kind``: every record names what it holds (accel, ellipsoid, marg, batch,
+    diagnosis), and each loader refuses the others by name."""
     params: np.ndarray
     """Paper 1's p = [alpha_x, alpha_y, alpha_z, S_xy, S_xz, S_yz, beta_x, beta_y, beta_z]."""
     stderr: np.ndarray
@@ -223,7 +226,7 @@ class AccelCalibration:
         p, s = self.params, self.stderr
         d = {
             "format_version": self.format_version,
-            "kind": "accel",
+            "kind": self.kind,
             "model": self.model,
             "sensor_id": self.sensor_id,
             "date": self.date,
@@ -610,6 +613,7 @@ class MagCalibration:
     (raw data centred on its mean, radius its mean norm) and after calibration.
     """
 
+    kind: ClassVar[str] = "ellipsoid"
     center: np.ndarray
     """Hard-iron offset (bias), raw units."""
     soft_iron: np.ndarray
@@ -796,7 +800,7 @@ class MagCalibration:
         return _sanitize(
             {
                 "format_version": self.format_version,
-                "kind": "ellipsoid",
+                "kind": self.kind,
                 "sensor": self.sensor,
                 "model": self.model,
                 "sensor_id": self.sensor_id,

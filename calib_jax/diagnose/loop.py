@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from scipy import stats
@@ -299,6 +300,7 @@ _FLOAT_FIELDS = "rms_before rms_after noise_floor noise_floor_white noise_floor_
 class Diagnosis:
     """The loop's outcome; :meth:`to_dict` is the ``calib-jax diagnose --json`` content."""
 
+    kind: ClassVar[str] = "diagnosis"
     sensor: str
     verdict: str  # "at_floor", "effects_added", "unexplained_structure", "not_possible"
     steps: list[dict]
@@ -331,7 +333,7 @@ class Diagnosis:
     def to_dict(self) -> dict:
         """The JSON record: ``kind`` "diagnosis", ``format_version``, then every field but the
         arrays kept for the report (non-finite numbers as null)."""
-        head = {"kind": "diagnosis", "format_version": DIAGNOSIS_FORMAT_VERSION}
+        head = {"kind": self.kind, "format_version": DIAGNOSIS_FORMAT_VERSION}
         return head | _jsonable({k: getattr(self, k) for k in _JSON_FIELDS})
 
     def save(self, path) -> None:
