@@ -42,7 +42,7 @@ from .geometry import (
 from .implicit import solve_implicit
 from .io.files import SensorLog
 from .lm import LMResult, fit_status, lm_solve, status_message
-from .models.accel import PARAM_NAMES, normalized_sphere_residual
+from .models.accel import ALPHA_ENTRIES, PARAM_NAMES, normalized_sphere_residual
 from .observations import AccelObservations, accel_observations, detection_found
 from .padding import pad_rows
 from .runtime import disk_jit
@@ -92,9 +92,7 @@ def initial_guess_moments(S: jax.Array) -> jax.Array:
     """:func:`initial_guess` from the moment matrix of the (normalised) samples."""
     c, M, ok = ellipsoid_fit_moments(S)
     alpha = sqrtm_inv_spd(jnp.where(ok, M, jnp.eye(3, dtype=S.dtype)))
-    p_ell = jnp.concatenate(
-        [jnp.diag(alpha), jnp.stack([alpha[0, 1], alpha[0, 2], alpha[1, 2]]), c]
-    )
+    p_ell = jnp.concatenate([alpha[ALPHA_ENTRIES], c])
     cs, r = sphere_fit_moments(S)
     p_sph = jnp.concatenate([jnp.full(3, r), jnp.zeros(3, S.dtype), cs])
     use_ell = ok & jnp.all(jnp.isfinite(p_ell))

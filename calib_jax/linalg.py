@@ -18,6 +18,15 @@ _LOOP_MAX = 32  # Cholesky: column loops, compile time independent of n
 _JACOBI_MAX = 16  # Jacobi eigh: 8 sweeps are ample up to here
 
 
+def det3(a: jax.Array) -> jax.Array:
+    """Determinant of a 3x3 matrix by cofactors (no LAPACK call: see the module docstring)."""
+    return (
+        a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
+        + a[0, 1] * (a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2])
+        + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0])
+    )
+
+
 def inv3(a: jax.Array) -> jax.Array:
     """Inverse of a 3x3 matrix by the adjugate (NaN/inf when singular, never an exception)."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]

@@ -36,6 +36,7 @@ from .calibration import (
     write_json_atomic,
 )
 from .mag import calibrate_mag
+from .models import layout
 from .status import is_usable, worst_status
 
 
@@ -223,7 +224,7 @@ class MARGRecord:
         elif isinstance(self.accel, MagCalibration):
             alpha = np.linalg.inv(self.accel.soft_iron)
             alpha = 0.5 * (alpha + alpha.T)
-            p = np.r_[np.diag(alpha), alpha[0, 1], alpha[0, 2], alpha[1, 2], self.accel.center]
+            p = np.r_[alpha[layout.ALPHA_ENTRIES], self.accel.center]
             acc = AccelParams.from_vector(jnp.asarray(p))
         else:
             acc = AccelParams.identity()

@@ -98,3 +98,18 @@ def test_uncertainty_cholesky_equals_eigh(n):
     cov, se, corr, _ = uncertainty_cholesky(jnp.asarray(J.T @ J), 2.0, False)
     assert np.all(np.isinf(np.asarray(se)))
     assert np.all(np.isnan(np.asarray(cov)))
+
+
+def test_det3_and_the_alpha_layout_both_ways():
+    """det3 against numpy's LU determinant (1e-12 relative on O(1) matrices), and
+    models.layout's two maps: alpha = p[ALPHA_INDEX] and back, alpha[ALPHA_ENTRIES] = p[:6]."""
+    from calib_jax.linalg import det3
+    from calib_jax.models.layout import ALPHA_ENTRIES, ALPHA_INDEX
+
+    a = np.random.default_rng(3).normal(size=(5, 3, 3))
+    for m in a:
+        assert float(det3(jnp.asarray(m))) == pytest.approx(np.linalg.det(m), rel=1e-12)
+    p = np.arange(1.0, 10.0)
+    alpha = p[ALPHA_INDEX]
+    np.testing.assert_array_equal(alpha, alpha.T)
+    np.testing.assert_array_equal(alpha[ALPHA_ENTRIES], p[:6])

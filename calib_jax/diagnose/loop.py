@@ -39,6 +39,7 @@ from scipy import stats
 
 from ..io.files import SensorLog
 from ..lm import is_converged
+from ..models.layout import ALPHA_ENTRIES
 from ..observations import accel_observations, screen_samples
 from ..static import detect_rest
 from . import model as M
@@ -145,16 +146,13 @@ class Observations:
 
 def _theta_from_alpha(alpha_n: np.ndarray, b_n: np.ndarray) -> np.ndarray:
     th = np.zeros(M.N_THETA)
-    th[0:3] = np.diag(alpha_n)
-    th[3:6] = alpha_n[0, 1], alpha_n[0, 2], alpha_n[1, 2]
+    th[0:6] = alpha_n[ALPHA_ENTRIES]
     th[6:9] = b_n
     return th
 
 
 def _alpha(theta: np.ndarray, free: np.ndarray) -> np.ndarray:
-    g = np.where(free[0:3], theta[0:3], theta[0])
-    s = np.where(free[3:6], theta[3:6], 0.0)
-    return np.array([[g[0], s[0], s[1]], [s[0], g[1], s[2]], [s[1], s[2], g[2]]])
+    return np.asarray(M.base_alpha(theta, free, np))
 
 
 # --------------------------------------------------------------------------- fitting helpers
@@ -969,12 +967,10 @@ def diagnose_accel(
     means = np.array([x[a:b].mean(0) for a, b in spans])
     from ..accel import initial_guess_points
     from ..geometry import sphere_fit_points
-    from ..models.accel import ALPHA_INDEX
 
     c0, k0 = sphere_fit_points(means)
     xn = (means - c0) / k0
-    p0 = initial_guess_points(xn)
-    theta0 = _theta_from_alpha(p0[ALPHA_INDEX], p0[6:9])
+    theta0 = np.r_[initial_guess_points(xn), np.zeros(M.N_THETA - 9)]  # paper 1's layout first
     motion = np.array([np.linalg.norm(x[a:b].std(0)) for a, b in spans]) / k0
     tm = np.array([t[a:b].mean() for a, b in spans])
     tp = None if temp is None else np.array([np.nanmean(temp[a:b]) for a, b in spans])

@@ -29,8 +29,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..linalg import inv3
+from ..linalg import det3, inv3
 from ..lm import lm_solve
+from ..models.layout import ALPHA_INDEX
 from ..runtime import disk_jit
 
 N_THETA = 30
@@ -67,18 +68,19 @@ def mask(*slots: str, base: str = "full") -> np.ndarray:
     return free
 
 
+def base_alpha(theta, free, xp=jnp):
+    """The base model's alpha from theta's first six entries (paper 1's layout,
+    models.layout.ALPHA_INDEX); a sphere's gains 2 and 3 follow gain 1 and its cross terms are
+    0. ``xp``: jnp inside the fits, np on the host."""
+    g = xp.where(free[0:3], theta[0:3], theta[0])
+    s = xp.where(free[3:6], theta[3:6], 0.0)
+    return xp.concatenate([g, s])[ALPHA_INDEX]
+
+
 def calibrated(theta, free, x, tau, temp):
     """The calibrated vector y (3,) of one observation (see the module docstring)."""
     th = jnp.where(free, theta, 0.0)
-    g = jnp.where(free[0:3], theta[0:3], theta[0])  # sphere: gains 2, 3 follow gain 1
-    s = th[3:6]
-    alpha = jnp.stack(
-        [
-            jnp.stack([g[0], s[0], s[1]]),
-            jnp.stack([s[0], g[1], s[2]]),
-            jnp.stack([s[1], s[2], g[2]]),
-        ]
-    )
+    alpha = base_alpha(theta, free)
     b = th[6:9] + th[9:12] * tau + th[12:15] * tau**2 + th[15:18] * temp + th[18:21] * temp**2
     y = inv3(alpha) @ (x - b) / (1.0 + th[21:24] * temp)
     return y - th[24:27] * y**2 - th[27:30] * y**3
@@ -86,14 +88,7 @@ def calibrated(theta, free, x, tau, temp):
 
 def radius(theta, free):
     """det(alpha)^(1/3): the radius of the fitted sphere in normalised units (about 1)."""
-    g = jnp.where(free[0:3], theta[0:3], theta[0])
-    s = jnp.where(free[3:6], theta[3:6], 0.0)
-    det = (
-        g[0] * (g[1] * g[2] - s[2] ** 2)
-        - s[0] * (s[0] * g[2] - s[2] * s[1])
-        + s[1] * (s[0] * s[2] - g[1] * s[1])
-    )
-    return jnp.cbrt(det)
+    return jnp.cbrt(det3(base_alpha(theta, free)))
 
 
 def residual(theta, data):

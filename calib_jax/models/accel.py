@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..linalg import inv3
-from .layout import ALPHA_INDEX, PARAM_NAMES  # noqa: F401  (re-exported)
+from .layout import ALPHA_ENTRIES, ALPHA_INDEX, PARAM_NAMES  # noqa: F401  (re-exported)
 
 
 class AccelParams(eqx.Module):

@@ -23,3 +23,7 @@ PARAM_NAMES = (
 ALPHA_INDEX = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
 """Where alpha's entries sit in paper 1's vector [ax, ay, az, Sxy, Sxz, Syz, bx, by, bz]
 (alpha is symmetric): ``p[ALPHA_INDEX]`` is alpha, in JAX or, on the host, in numpy."""
+
+ALPHA_ENTRIES = (np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2]))
+"""The way back: ``alpha[ALPHA_ENTRIES]`` is [ax, ay, az, Sxy, Sxz, Syz], the vector's first
+six entries (the upper triangle of a symmetric alpha)."""
