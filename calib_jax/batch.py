@@ -37,7 +37,7 @@ from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 from .accel import MODELS as ACCEL_MODELS
 from .accel import _units_from_norm, initial_guess_moments
 from .calibration import BatchRecord
-from .geometry import moments
+from .geometry import centre_and_scale, moments
 from .linalg import cholesky_small, eigh_small, inv3
 from .lm import lm_solve
 from .mag import ellipsoid_start_moments
@@ -229,16 +229,6 @@ class BatchResult(eqx.Module):
         return f"<b>BatchResult</b>: {ok} of {n} sensors converged" + rows_html(self.rows())
 
 
-def _normalise(raw, valid):
-    """One sensor: mean and RMS radius of the valid samples."""
-    w = valid.astype(raw.dtype)
-    n = jnp.maximum(jnp.sum(w), 1.0)
-    mean = jnp.sum(raw * w[:, None], axis=0) / n
-    d = jnp.where(valid[:, None], raw - mean, 0.0)
-    k = jnp.sqrt(jnp.sum(w * jnp.sum(d * d, axis=1)) / n)
-    return mean, jnp.where(k > 0, k, 1.0)
-
-
 def _batch_moments(raw, valid):
     """(S, mean, k) per sensor: moments of the normalised samples, one sensor at a time.
 
@@ -254,7 +244,7 @@ def _batch_moments(raw, valid):
         # isfinite + where before the call read and wrote all of it twice more)
         v = v & jnp.all(jnp.isfinite(r), axis=-1)
         r = jnp.where(v[:, None], r, 0.0)  # NaN never enters the arithmetic
-        mean, k = _normalise(r, v)
+        mean, k = centre_and_scale(r, v.astype(r.dtype))
         return moments((r - mean) / k, v.astype(r.dtype)), mean, k
 
     return jax.lax.map(one, (raw, valid), batch_size=8)

@@ -39,6 +39,20 @@ def moments(x: jax.Array, w: jax.Array) -> jax.Array:
     return jnp.concatenate([A, bottom], axis=0) * d[:, None] * d[None, :]
 
 
+def centre_and_scale(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Weighted mean (3,) and RMS distance from it of samples x (N, 3): the one normalisation
+    of the batch and pipeline fits (x -> (x - mean) / scale). Weight-0 rows are padding and
+    may hold anything; no spread gives scale 1."""
+    use = w > 0
+    x = jnp.where(use[:, None], x, 0.0)
+    n = jnp.sum(w)
+    n = jnp.where(n > 0, n, 1.0)
+    mean = (w @ x) / n
+    d = jnp.where(use[:, None], x - mean, 0.0)
+    k = jnp.sqrt(jnp.sum(w * jnp.sum(d * d, axis=1)) / n)
+    return mean, jnp.where(k > 0, k, 1.0)
+
+
 def sphere_fit(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Weighted algebraic sphere fit |x - c|^2 = r^2, see :func:`sphere_fit_moments`."""
     return sphere_fit_moments(moments(x, w))

@@ -54,6 +54,7 @@ from jaxtyping import Array, ArrayLike, Float, Int, Real
 
 from .accel import fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
+from .geometry import centre_and_scale
 from .mag import fit_ellipsoid_normalized
 from .models.accel import AccelParams
 from .models.mag import natural_radius, raw_calibration, raw_covariance, unpack
@@ -200,11 +201,9 @@ class Fit(eqx.Module):
 
 
 def _normalisation(raw, w):
-    """Centre and RMS radius of the data (held constant under differentiation: the fit is an
-    exact reparametrisation, so they only condition the solve)."""
-    wsum = jnp.sum(w)
-    m = (w @ raw) / wsum
-    s = jnp.sqrt(jnp.sum(w * jnp.sum((raw - m) ** 2, axis=-1)) / wsum)
+    """geometry.centre_and_scale, held constant under differentiation: the fit is an exact
+    reparametrisation, so centre and scale only condition the solve."""
+    m, s = centre_and_scale(raw, w)
     return jax.lax.stop_gradient(m), jax.lax.stop_gradient(s)
 
 
