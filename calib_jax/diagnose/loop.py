@@ -41,6 +41,7 @@ from ..io.files import SensorLog
 from ..lm import is_converged
 from ..models.layout import ALPHA_ENTRIES
 from ..observations import accel_observations, screen_samples
+from ..padding import pad_rows
 from ..static import detect_rest
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
@@ -158,21 +159,15 @@ def _alpha(theta: np.ndarray, free: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- fitting helpers
 
 
-def _bucket(m: int, step: int) -> int:
-    return max(step, -(-m // step) * step)
-
-
 class _Problems:
     """A stack of problems over the same observations (padded to a bucket), fitted at once."""
 
     def __init__(self, obs: Observations, tau: np.ndarray, T: np.ndarray):
         self.obs = obs
-        step = 64 if obs.m <= 1024 else 512
-        self.size = _bucket(obs.m, step)
-        pad = self.size - obs.m
-        self.x = np.concatenate([obs.x, np.tile([[1.0, 0.0, 0.0]], (pad, 1))])
-        self.tau = np.concatenate([tau, np.zeros(pad)])
-        self.T = np.concatenate([T, np.zeros(pad)])
+        self.x, _ = pad_rows(obs.x)  # weight 0 in every problem's row of weights (add)
+        self.size = len(self.x)
+        self.tau, _ = pad_rows(tau)
+        self.T, _ = pad_rows(T)
         self.rows: list[tuple] = []
 
     def add(self, theta0, w, free, x=None):
