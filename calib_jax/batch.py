@@ -189,6 +189,7 @@ class BatchResult(eqx.Module):
                     "rms": float(self.rms[i]),
                     "iterations": int(self.iterations[i]),
                     "n_points": int(self.n_samples[i]),
+                    **_linear_forms(params[i]),
                 }
             )
         return out
@@ -227,6 +228,19 @@ class BatchResult(eqx.Module):
         ok = int(self.success.sum())
         n = len(self.success)
         return f"<b>BatchResult</b>: {ok} of {n} sensors converged" + rows_html(self.rows())
+
+
+def _linear_forms(p: np.ndarray) -> dict:
+    """The forward model and the correction matrix of one entry (calibration.linear_forms, as
+    every calibration JSON writes them); none for a fit without finite parameters."""
+    from .calibration import linear_forms
+    from .models.layout import ALPHA_INDEX
+
+    if not np.all(np.isfinite(p)):
+        return {}
+    if len(p) == 9:  # paper 1: raw = alpha a + beta
+        return linear_forms(offset=p[6:9], forward=p[ALPHA_INDEX])
+    return linear_forms(offset=p[:3], correction=p[3:].reshape(3, 3))  # y = W (raw - c)
 
 
 def _batch_moments(raw, valid):

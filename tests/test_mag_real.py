@@ -241,6 +241,9 @@ def test_magnetometer_one_answer_on_every_path(ck, tmp_path, capsys):
     [r] = json.loads((tmp_path / "b.json").read_text())["results"]
     assert r["status"] == "ok"
     close(r["params"], r["stderr"], 1e-7, 1e-5, "calib-jax batch --sensor mag")
+    for form in ("forward", "correction"):  # both linear forms, as every calibration JSON
+        np.testing.assert_allclose(r[form]["matrix"], one.to_dict()[form]["matrix"], rtol=1e-6)
+        np.testing.assert_allclose(r[form]["offset"], one.to_dict()[form]["offset"], rtol=1e-6)
 
 
 def test_soft_iron_standard_errors_do_not_follow_the_unit(ck):

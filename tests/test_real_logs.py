@@ -128,6 +128,10 @@ def test_accelerometer_one_answer_on_every_path(xsens, tmp_path):
     [b] = fit_prepared([("xsens", points, info)], "accel", {})
     assert b["status"] == "ok" and b["g"] == ref.g and b["n_points"] == ref.n_points
     close(b["params"], b["stderr"], "calib-jax batch")
+    for form in ("forward", "correction"):  # both linear forms, as every calibration JSON
+        np.testing.assert_allclose(
+            b[form]["matrix"], ref.to_dict()[form]["matrix"], rtol=1e-6, err_msg=form
+        )
 
     f = pl.fit_accel(jnp.asarray(points), ref.g)
     close(f.params.to_vector(), f.stderr, "pipeline.fit_accel")
