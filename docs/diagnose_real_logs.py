@@ -135,7 +135,11 @@ def main() -> None:
         if name in args.figures:
             write_report(d, out)
         print(f"== {name} ({dt:.1f} s)\n{d.summary()}\n")
-        notes = "; ".join(n for n in d.notes if not n.startswith(("no temperature", "angles in")))
+        # the way in (detector settings and candidates) is in each JSON; the table keeps findings
+        way_in = ("no temperature", "angles in", "static detection", "fixed blocks")
+        notes = "; ".join(
+            n for n in d.notes if not n.startswith(way_in) and " static intervals, " not in n
+        )
         rows.append(
             f"| {name} | {desc} | {d.verdict} | {', '.join(d.effects) or '-'} | "
             f"{fmt(d, d.rms_before)} -> {fmt(d, d.rms_after)} | {fmt(d, d.noise_floor)} "
