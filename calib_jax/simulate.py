@@ -1,9 +1,26 @@
-"""Simulated accelerometer logs with known truth.
+"""Simulated logs with known truth: the one simulator of calib_jax.
 
 A log is a sequence of static poses (gravity direction fixed in the sensor frame) joined by
 hand-held transitions (the direction sweeps to the next pose while the hand adds a smooth
 disturbance acceleration). The sensor reads a' = alpha a + beta + noise (paper 1, eq. 1),
-optionally rounded to integer counts.
+optionally rounded to integer counts, and optionally with effects the model lacks (below).
+MARG: both sensors along an attitude path (:func:`simulate_marg`), a recording session
+(:func:`simulate_session`).
+
+Effects (``effects=`` of :func:`simulate_accel`, :func:`simulate_accel_log` and
+:func:`simulate_mag_log`; sizes in units of g or of the field), each in the form
+:mod:`calib_jax.diagnose.model` fits it:
+
+=====================  =========================================================
+``bias_drift``         bias + d tau, d = ``size`` * (1, -0.7, 0.5), tau in [-1/2, 1/2]
+``hard_iron_drift``    the same on the magnetometer centre
+``temperature_bias``   bias + c T, T a two-cycle temperature swing scaled to [-1/2, 1/2]
+``temperature_scale``  readings * (1 + k T), k = ``size`` * (1, -0.7, 0.5)
+``scale_nonlinearity`` y_j + q_j y_j^2 with q = ``size`` * (0.6, -1, 0.8)
+``outliers``           three poses disturbed by ``4 size`` along a random direction
+``soft_iron``          (magnetometer) a full ellipsoid, declared as a sphere
+``periodic_bias``      NOT in the diagnosis's catalogue: bias + ``size`` sin(2 pi 3 tau) on x
+=====================  =========================================================
 
 Host-side numpy: simulation makes test data, it is not part of a jitted pipeline.
 """
@@ -77,11 +94,27 @@ class SimulatedLog:
     directions: np.ndarray
     """Unit gravity direction of each pose in the sensor frame, (P, 3)."""
     sample_rate: float
+    temp: np.ndarray | None = None
+    """Temperature, degrees C (N,): a two-cycle swing, simulated when ``effects`` is given."""
+    effects: tuple[str, ...] = ()
+    effect_size: float = 0.0
+    noise: float = 0.0
+    disturbed: tuple[int, ...] = ()
+    """Poses moved by the ``outliers`` effect."""
 
     @property
     def static(self) -> np.ndarray:
         """True where the sample was recorded at rest."""
         return self.pose >= 0
+
+    @property
+    def intervals(self) -> list[tuple[int, int]]:
+        """The static poses as sample spans [start, stop)."""
+        out = []
+        for k in range(int(self.pose.max()) + 1):
+            idx = np.flatnonzero(self.pose == k)
+            out.append((int(idx[0]), int(idx[-1]) + 1))
+        return out
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -156,6 +189,8 @@ def simulate_accel(
     g: float = 1.0,
     sample_rate: float = 100.0,
     quantize: bool = False,
+    effects: tuple[str, ...] | None = None,
+    effect_size: float = 3e-3,
     rng: np.random.Generator | int = 0,
 ) -> SimulatedLog:
     """Simulate a multi-position static calibration log.
@@ -179,6 +214,9 @@ def simulate_accel(
         Reference magnitude |a| at rest, in reference units.
     quantize : bool
         Round readings to integers (raw counts).
+    effects : tuple of str, optional
+        Effects the nine-parameter model lacks (module docstring), of size ``effect_size``.
+        Given (even empty), the log also gets a temperature column.
     """
     rng = np.random.default_rng(rng)
     params = np.asarray(params, dtype=float)
@@ -186,10 +224,18 @@ def simulate_accel(
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     alpha, beta = alpha_beta(params)
     a, pose = pose_path(dirs, samples_per_pose, transition_samples, initial_rest, hand_motion, rng)
-    raw = (a * g) @ alpha.T + beta + rng.normal(scale=noise, size=a.shape)
+    t = np.arange(len(a)) / sample_rate
+    temp, disturbed = None, ()
+    if effects is None:
+        raw = (a * g) @ alpha.T + beta
+    else:
+        tau, temp, T = effect_drivers(t, rng)
+        raw, disturbed = read_with_effects(
+            a * g, alpha, beta, effects, effect_size, tau, T, rng, pose
+        )
+    raw = raw + rng.normal(scale=noise, size=a.shape)
     if quantize:
         raw = np.round(raw)
-    t = np.arange(len(raw)) / sample_rate
     return SimulatedLog(
         t=t,
         raw=raw,
@@ -198,6 +244,140 @@ def simulate_accel(
         pose=pose,
         directions=dirs,
         sample_rate=float(sample_rate),
+        temp=temp,
+        effects=tuple(effects or ()),
+        effect_size=float(effect_size) if effects else 0.0,
+        noise=float(noise),
+        disturbed=disturbed,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# effects the models lack (module docstring), for the close-the-loop diagnosis's checks
+
+_EFFECT_DIRS = np.array([1.0, -0.7, 0.5])
+
+
+def effect_drivers(t: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(tau, temp, T): time scaled to [-1/2, 1/2], a two-cycle temperature swing of 20 C
+    around 30 C with a random phase, and that swing scaled to [-1/2, 1/2]."""
+    tau = (t - t.min()) / np.ptp(t) - 0.5
+    temp = 30 + 10 * np.sin(2 * np.pi * 2 * (tau + 0.5) + rng.uniform(0, 2 * np.pi))
+    T = (temp - 0.5 * (temp.max() + temp.min())) / np.ptp(temp)
+    return tau, temp, T
+
+
+def read_with_effects(
+    u, alpha, beta, effects, size, tau, T, rng, pose=None
+) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Readings alpha y + bias (no noise) of true vectors u (N, 3) with the named effects, and
+    the poses the ``outliers`` effect moved (it needs ``pose``, the pose of each sample)."""
+    y = u.copy()
+    if "scale_nonlinearity" in effects:
+        y = y + size * np.array([0.6, -1.0, 0.8]) * y**2
+    if "temperature_scale" in effects:
+        y = y * (1 + size * _EFFECT_DIRS * T[:, None])
+    bias = np.broadcast_to(beta, u.shape).copy()
+    if "bias_drift" in effects or "hard_iron_drift" in effects:
+        bias = bias + size * _EFFECT_DIRS * tau[:, None]
+    if "temperature_bias" in effects:
+        bias = bias + size * _EFFECT_DIRS * T[:, None]
+    if "periodic_bias" in effects:
+        bias[:, 0] += size * np.sin(2 * np.pi * 3 * tau)
+    x = y @ alpha.T + bias
+    disturbed: tuple[int, ...] = ()
+    if "outliers" in effects and pose is not None:
+        n_poses = pose.max() + 1
+        disturbed = tuple(int(p) for p in rng.choice(np.arange(1, n_poses), 3, replace=False))
+        for p in disturbed:
+            d = rng.normal(size=3)
+            x[pose == p] += 4 * size * d / np.linalg.norm(d)
+    return x, disturbed
+
+
+def _random_board(rng) -> np.ndarray:
+    """A random nine-parameter calibration: gains 1 +- 0.05, non-orthogonality +- 0.02, bias
+    +- 0.05 (the diagnosis's simulated sensors)."""
+    return random_params(rng, gain_spread=0.05, nonorth_spread=0.02, bias_spread=0.05)
+
+
+def simulate_accel_log(
+    effects: tuple[str, ...] = (),
+    *,
+    size: float = 3e-3,
+    poses: int = 60,
+    hold: int = 100,
+    first_hold: int = 2000,
+    move: int = 30,
+    rate: float = 100.0,
+    noise: float = 2e-3,
+    seed: int = 0,
+) -> SimulatedLog:
+    """A random board (:func:`_random_board`) in ``poses`` uniformly random poses of ``hold``
+    samples (the first ``first_hold``, like imu_tk's logs), moves without hand acceleration
+    (the diagnosis reads the poses only), with ``effects`` of ``size``."""
+    rng = np.random.default_rng(seed)
+    params = _random_board(rng)
+    dirs = random_directions(poses, rng)
+    return simulate_accel(
+        params,
+        dirs,
+        samples_per_pose=hold,
+        transition_samples=move,
+        initial_rest=first_hold - hold,
+        noise=noise,
+        hand_motion=0.0,
+        sample_rate=rate,
+        effects=tuple(effects),
+        effect_size=size,
+        rng=rng,
+    )
+
+
+def simulate_mag_log(
+    effects: tuple[str, ...] = (),
+    *,
+    size: float = 0.02,
+    samples: int = 6000,
+    rest: int = 1500,
+    rate: float = 50.0,
+    noise: float = 5e-3,
+    seed: int = 0,
+) -> SimulatedLog:
+    """A magnetometer of unit field on a random board (alpha, beta as the accelerometer's;
+    ``soft_iron`` adds a full ellipsoid): a rest of ``rest`` samples, then
+    :func:`tumble_quaternions`'s smooth tumble (one knot every 4 s), with ``effects``
+    (``outliers`` left out: a tumble has no poses). ``pose`` is 0 during the rest."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    params = _random_board(rng)
+    alpha, b = alpha_beta(params)
+    if "soft_iron" in effects:
+        alpha = alpha + np.diag(size * np.array([3.0, -2.0, 1.0]))
+    n = samples
+    quat = tumble_quaternions(n - rest, rng, knots=max(int((n - rest) / rate / 4.0), 2) + 1)
+    C = Rotation.from_quat(np.roll(quat, -1, axis=1)).as_matrix()  # body -> nav, (w,x,y,z) in
+    h = random_directions(1, rng)[0]
+    v = np.concatenate([np.repeat(C[:1], rest, axis=0), C]).transpose(0, 2, 1) @ h  # C' h
+    t = np.arange(n) / rate
+    tau, temp, T = effect_drivers(t, rng)
+    kept = tuple(e for e in effects if e != "outliers")
+    x, _ = read_with_effects(v, alpha, b, kept, size, tau, T, rng)
+    x = x + noise * rng.normal(size=x.shape)
+    pose = np.where(np.arange(n) < rest, 0, -1)
+    return SimulatedLog(
+        t=t,
+        raw=x,
+        params=params,
+        g=1.0,
+        pose=pose,
+        directions=h[None],
+        sample_rate=float(rate),
+        temp=temp,
+        effects=tuple(effects),
+        effect_size=float(size),
+        noise=float(noise),
     )
 
 

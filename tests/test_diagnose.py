@@ -19,8 +19,8 @@ from calib_jax.cli import main
 from calib_jax.datasets import accel_tumble_log_path, demo_log_path, qmc_log_path
 from calib_jax.diagnose import allan_deviation, diagnose_accel, diagnose_mag
 from calib_jax.diagnose import model as M
-from calib_jax.diagnose.simulate import simulate_accel_log, simulate_mag_log
 from calib_jax.io.files import load_log
+from calib_jax.simulate import simulate_accel_log, simulate_mag_log
 
 from .conftest import Tol
 
@@ -90,7 +90,7 @@ def test_accel_effect_is_found_and_brings_the_residual_to_the_floor(effect):
         # a = y - q y^2 in normalised units (gains ~ 1 +- 5 %), so q ~ size * (0.6, -1, 0.8)
         q = np.asarray(d.steps[-1]["coefficients"]["quadratic"]["value"])
         se = np.asarray(d.steps[-1]["coefficients"]["quadratic"]["stderr"])
-        truth = s.size * np.array([0.6, -1.0, 0.8])
+        truth = s.effect_size * np.array([0.6, -1.0, 0.8])
         assert np.all(np.abs(q - truth) < Tol.N_SIGMA * se + 0.05 * np.abs(truth)), (q, truth)
     if effect == "outliers":
         assert {r["index"] for r in d.rejected} == set(s.disturbed)
