@@ -212,6 +212,125 @@ def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple):
     return res, np.asarray(c), np.asarray(M), np.asarray(rel)[: len(xn)], float(radius)
 
 
+def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str]]:
+    """(N, 3) float vectors, the source path and the loader's notes, from an array or a log."""
+    if not isinstance(data, SensorLog):
+        x = np.asarray(data, float)
+        source, notes = None, []
+    else:
+        x = data.mag if sensor == "mag" else data.acc
+        if x is None:
+            cols = "mx, my, mz" if sensor == "mag" else "ax, ay, az"
+            raise ValueError(f"{data.path}: no {sensor} columns ({cols}); map them with --columns")
+        x, source, notes = np.asarray(x, float), data.path, list(data.notes)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"{sensor} data must be (samples, 3), got shape {x.shape}")
+    return x, source, notes
+
+
+def _check_options(model: str, solver: str, field: float | None) -> None:
+    if model not in (*MAG_MODELS, "auto"):
+        raise ValueError(f"model must be one of sphere, diag, full, auto; got {model!r}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if field is not None and not (np.isfinite(field) and field > 0):
+        raise ValueError(f"field must be a positive magnitude, got {field!r}")
+    if jnp.zeros(()).dtype != jnp.float64:
+        _warnings.warn(
+            "jax_enable_x64 is off: fitting in float32 loses ~1e-7 relative accuracy; call "
+            "jax.config.update('jax_enable_x64', True) first",
+            stacklevel=3,
+        )
+
+
+def _screened(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, list[str]]:
+    """The samples to fit (finite, off a saturated axis), their mean and RMS spread, and the
+    warnings about what was left out; a ValueError for data no ellipsoid can be fitted to."""
+    finite = np.all(np.isfinite(x), axis=1)
+    if finite.sum() < 20:
+        raise ValueError(
+            f"only {int(finite.sum())} finite samples; an ellipsoid needs many more (record a "
+            "slow tumble through all orientations, a few hundred samples at least)"
+        )
+    big = np.max(np.abs(x[finite]), axis=1)
+    if big.max() > EXTREME:
+        k = int(np.flatnonzero(finite)[np.argmax(big)])
+        raise ValueError(
+            f"sample {k} holds {big.max():.3g}: values beyond {EXTREME:.0e} cannot be fitted in "
+            "float64 (the ellipsoid matrix is 1 / radius^2); convert the data to a physical "
+            "unit, or drop the corrupt rows"
+        )
+    _spread(x[finite])  # all samples identical (a stuck sensor) is that error, not saturation
+    valid, warn = screen_samples(x, "mag")
+    xv = x[valid]
+    if len(xv) < 20:
+        raise ValueError(f"only {len(xv)} unsaturated finite samples; record within range")
+    mean, s = _spread(xv)
+    return xv, mean, s, warn
+
+
+def _check_not_flat(xn: np.ndarray) -> None:
+    """A ValueError when the normalised samples' directions lie in one plane."""
+    cs, _ = sphere_fit_points(xn)
+    d = xn - cs
+    dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    _, min_eig, unseen = sphere_coverage(dirs)
+    if min_eig < FLAT:
+        raise ValueError(
+            f"the field directions lie in one plane (normal {_vec(unseen)} in the sensor frame): "
+            "this looks like a turn about a single axis, which cannot determine an ellipsoid. "
+            "Tumble the sensor through all orientations; a one-axis turn is what the plane "
+            "alignment (calib_jax.align.plane_alignment) needs instead"
+        )
+
+
+def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:
+    """Fit every candidate model and choose one: (fits, chosen, the selection table).
+
+    fits: model -> (result, c_n, M_n, mean square radial error in units of s, BIC, mean square
+    relative radial error |W (x - c)| / r - 1). ``model="auto"`` takes the lowest BIC among
+    the fits that converged to a bounded, well-determined ellipsoid (appending to ``warn``
+    when none is well determined)."""
+    candidates = MAG_MODELS if model == "auto" else (model,)
+    n = len(xn)
+    fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float, float]] = {}
+    for m in candidates:
+        res, c_n, M_n, rel, radius = _fit(xn, m, solver, opts)
+        # the BIC's radial error is in units of s, not relative to the fitted radius (which a
+        # misfitting model lowers by growing: see quadric_residual)
+        ms = float(np.mean((rel * radius) ** 2))
+        bic = n * np.log(max(ms, 1e-300)) + N_PARAMS[m] * np.log(n)
+        fits[m] = (res, c_n, M_n, ms, bic, float(np.mean(rel**2)))
+    usable = {
+        m: f
+        for m, f in fits.items()
+        if is_converged(int(f[0].status)) and natural_radius(jnp.asarray(f[2])) < RUNAWAY
+    }
+    # prefer models whose parameters the data pin down: on partial coverage a full ellipsoid
+    # can win the BIC by fitting directions it has not seen (BROAD trial 02, first half: full
+    # 21 deg median heading error held out, sphere 6.9 deg)
+    determined = {m: f for m, f in usable.items() if np.all(np.asarray(f[0].stderr) <= POOR_STDERR)}
+    # rms_pct: the RMS of |W (x - c)| / r - 1 in percent, what the chosen model reports as
+    # rms_after_pct
+    selection = {
+        m: {
+            "bic": f[4],
+            "rms_pct": 100 * np.sqrt(f[5]),
+            "usable": m in usable,
+            "well_determined": m in determined,
+        }
+        for m, f in fits.items()
+    }
+    if model != "auto":
+        return fits, model, selection
+    # the lowest BIC among fits that converged to a bounded ellipsoid; sphere otherwise
+    pool = determined or usable
+    chosen = min(pool, key=lambda m: pool[m][4]) if pool else "sphere"
+    if pool is usable and len(usable) > 0 and not determined:
+        warn.append("no candidate model is well determined by these data")
+    return fits, chosen, selection
+
+
 def calibrate_mag(
     data: np.ndarray | SensorLog,
     *,
@@ -261,109 +380,13 @@ def calibrate_mag(
         values float64 cannot fit (beyond 1e100, or a spread below 1e-100 or 1e-9 of the
         offset).
     """
-    source = None
-    warn: list[str] = []
-    notes: list[str] = []
-    if isinstance(data, SensorLog):
-        x = data.mag if sensor == "mag" else data.acc
-        if x is None:
-            cols = "mx, my, mz" if sensor == "mag" else "ax, ay, az"
-            raise ValueError(f"{data.path}: no {sensor} columns ({cols}); map them with --columns")
-        source = data.path
-        notes += list(data.notes)
-        x = np.asarray(x, float)
-    else:
-        x = np.asarray(data, float)
-    if x.ndim != 2 or x.shape[1] != 3:
-        raise ValueError(f"{sensor} data must be (samples, 3), got shape {x.shape}")
-    if model not in (*MAG_MODELS, "auto"):
-        raise ValueError(f"model must be one of sphere, diag, full, auto; got {model!r}")
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-    if field is not None and not (np.isfinite(field) and field > 0):
-        raise ValueError(f"field must be a positive magnitude, got {field!r}")
-    if jnp.zeros(()).dtype != jnp.float64:
-        _warnings.warn(
-            "jax_enable_x64 is off: fitting in float32 loses ~1e-7 relative accuracy; call "
-            "jax.config.update('jax_enable_x64', True) first",
-            stacklevel=2,
-        )
-
-    finite = np.all(np.isfinite(x), axis=1)
-    if finite.sum() < 20:
-        raise ValueError(
-            f"only {int(finite.sum())} finite samples; an ellipsoid needs many more (record a "
-            "slow tumble through all orientations, a few hundred samples at least)"
-        )
-    big = np.max(np.abs(x[finite]), axis=1)
-    if big.max() > EXTREME:
-        k = int(np.flatnonzero(finite)[np.argmax(big)])
-        raise ValueError(
-            f"sample {k} holds {big.max():.3g}: values beyond {EXTREME:.0e} cannot be fitted in "
-            "float64 (the ellipsoid matrix is 1 / radius^2); convert the data to a physical "
-            "unit, or drop the corrupt rows"
-        )
-    _spread(x[finite])  # all samples identical (a stuck sensor) is that error, not saturation
-    valid, notes = screen_samples(x, "mag")
-    warn += notes
-    xv = x[valid]
-    if len(xv) < 20:
-        raise ValueError(f"only {len(xv)} unsaturated finite samples; record within range")
-    mean, s = _spread(xv)
-
+    x, source, notes = _input_vectors(data, sensor)
+    _check_options(model, solver, field)
+    xv, mean, s, warn = _screened(x)
     xn = (xv - mean) / s
-    cs, _ = sphere_fit_points(xn)
-    d = xn - cs
-    dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    _, min_eig, unseen = sphere_coverage(dirs)
-    if min_eig < FLAT:
-        raise ValueError(
-            f"the field directions lie in one plane (normal {_vec(unseen)} in the sensor frame): "
-            "this looks like a turn about a single axis, which cannot determine an ellipsoid. "
-            "Tumble the sensor through all orientations; a one-axis turn is what the plane "
-            "alignment (calib_jax.align.plane_alignment) needs instead"
-        )
+    _check_not_flat(xn)
     opts = tuple(sorted((solver_options or {}).items()))
-    candidates = MAG_MODELS if model == "auto" else (model,)
-    n = len(xn)
-    # model -> (result, c_n, M_n, mean square radial error in units of s, BIC, mean square
-    # relative radial error |W (x - c)| / r - 1)
-    fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float, float]] = {}
-    for m in candidates:
-        res, c_n, M_n, rel, radius = _fit(xn, m, solver, opts)
-        # the BIC's radial error is in units of s, not relative to the fitted radius (which a
-        # misfitting model lowers by growing: see quadric_residual)
-        ms = float(np.mean((rel * radius) ** 2))
-        bic = n * np.log(max(ms, 1e-300)) + N_PARAMS[m] * np.log(n)
-        fits[m] = (res, c_n, M_n, ms, bic, float(np.mean(rel**2)))
-    usable = {
-        m: f
-        for m, f in fits.items()
-        if is_converged(int(f[0].status)) and natural_radius(jnp.asarray(f[2])) < RUNAWAY
-    }
-    # prefer models whose parameters the data pin down: on partial coverage a full ellipsoid
-    # can win the BIC by fitting directions it has not seen (BROAD trial 02, first half: full
-    # 21 deg median heading error held out, sphere 6.9 deg)
-    determined = {m: f for m, f in usable.items() if np.all(np.asarray(f[0].stderr) <= POOR_STDERR)}
-    selection = {
-        m: {
-            "bic": f[4],
-            "rms_pct": 100 * np.sqrt(f[5]),
-            "usable": m in usable,
-            "well_determined": m in determined,
-        }
-        for m, f in fits.items()
-    }
-    # rms_pct: the RMS of |W (x - c)| / r - 1 in percent, what the chosen model reports as
-    # rms_after_pct
-    if model == "auto":
-        # the lowest BIC among fits that converged to a bounded ellipsoid; sphere otherwise
-        pool = determined or usable
-        chosen = min(pool, key=lambda m: pool[m][4]) if pool else "sphere"
-        if pool is usable and len(usable) > 0 and not determined:
-            warn.append("no candidate model is well determined by these data")
-    else:
-        chosen = model
+    fits, chosen, selection = _fit_candidates(xn, model, solver, opts, warn)
     res, c_n, M_n = fits[chosen][:3]
 
     M = M_n / s**2

@@ -339,3 +339,21 @@ def test_moments_are_the_weighted_monomial_products():
     phi = np.stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, X, Y, Z, 1 + 0 * X], 1)
     S = np.asarray(moments(jnp.asarray(x), jnp.asarray(w)))
     np.testing.assert_allclose(S, (phi * w[:, None]).T @ phi, rtol=1e-12, atol=1e-12 * w.sum())
+
+
+def test_the_logs_notes_are_notes_and_left_out_samples_are_warnings(tmp_path):
+    """A headerless log's loader note (how its columns were read) is among the record's notes,
+    and the rows left out (NaN) are a warning, not a note. Before, calibrate_mag replaced the
+    loader's notes by the screening's warnings, so they were lost and the warnings doubled."""
+    import calib_jax as cj
+
+    x, _, _ = ellipsoid_points(2)
+    x = np.array(x)
+    x[5] = np.nan
+    np.savetxt(tmp_path / "m.csv", x, delimiter=",")
+    log = cj.load_log(tmp_path / "m.csv", sensor="mag")
+    assert log.notes
+    cal = calibrate_mag(log, model="full")
+    assert cal.notes == list(log.notes)
+    left_out = "rows with NaN or inf were left out of the fit"
+    assert any(left_out in w for w in cal.warnings) and not any(left_out in n for n in cal.notes)
