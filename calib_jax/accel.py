@@ -356,14 +356,10 @@ def calibrate_accel(
     log_notes: list[str] = []
     source = None
     if isinstance(data, SensorLog):
-        if data.acc is None:
-            raise ValueError(
-                f"{data.path}: no accelerometer columns (ax, ay, az); map them with --columns"
-            )
         sample_rate = sample_rate or data.sample_rate
         log_notes = list(data.notes)
         source = data.path
-        x = np.asarray(data.acc, float)
+        x = data.vectors("accel")
     else:
         x = np.asarray(data, float)
     if x.ndim != 2 or x.shape[1] != 3:
@@ -396,58 +392,14 @@ def calibrate_accel(
     n_free = int(sum(MODELS[model]))
 
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
-    detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
-    if units == "auto":
-        if detected is None:
-            raise ValueError(
-                f"the {report.n_intervals} static means have median norm {static_norm:.4g} "
-                f"(radius {fit_norm:.4g} about their fitted centre), which fits none of the "
-                f"units considered ({_UNIT_RANGES}); pass units= (--units counts|g|m/s^2)"
-            )
-        units = detected
-    elif detected != units and units != "counts":  # counts have any scale: nothing to check
-        raise ValueError(
-            f"units={units!r}, but the static readings have norm {static_norm:.4g}, which looks "
-            f"like {detected or 'no known unit'} ({_UNIT_RANGES}); pass --units "
-            f"{detected or 'counts'} (or fix the scaling of the log)"
-        )
-    if g is None:
-        g = G_STANDARD if units == "m/s^2" else 1.0
-    elif output_units is None:
-        # a g off the data's unit (m/s^2 data with g = 1) silently rescales the output; with
-        # output_units given the conversion is the user's stated intent
-        from .batch import check_reference_magnitude
-
-        try:
-            check_reference_magnitude(g, units, static_norm)
-        except ValueError as exc:
-            raise ValueError(f"{exc}; or give the output unit (--out-units) to convert") from None
-    if g <= 0 or not np.isfinite(g):
-        raise ValueError(f"g must be a positive number, got {g}")
+    units = _resolve_units(units, report.n_intervals, static_norm, fit_norm)
+    g = _reference_magnitude(g, units, static_norm, output_units)
     out_units = output_units or ("g" if units == "counts" else units)
+    warn += _coverage_warnings(pts, c_s, n_free)
 
-    # coverage: plane and hemisphere
-    dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
-    flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
-    _check_plane(flatness, normal)
-    if min_cos > -0.05:
-        warn.append(
-            f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
-            "are correlated and poorly determined; add poses from the opposite side"
-        )
-
-    if len(pts) - n_free < 3:
-        warn.append(
-            f"{len(pts)} fit points for {n_free} parameters: almost no redundancy, so the "
-            "standard errors and the residual say little; fit the samples (use='samples') or "
-            "record more poses"
-        )
-
-    # normalise and fit
+    # normalise (centre and radius of the points' sphere) and fit
     k = r_s
-    xn = (pts - c_s) / k
-    n = len(xn)
-    xpad, wpad = pad_rows(xn)
+    n = len(pts)
     opts = tuple(sorted((solver_options or {}).items()))
     if jnp.zeros(()).dtype != jnp.float64:
         _warnings.warn(
@@ -455,45 +407,19 @@ def calibrate_accel(
             "call jax.config.update('jax_enable_x64', True) first",
             stacklevel=2,
         )
+    xpad, wpad = pad_rows((pts - c_s) / k)
     res = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
-    pn = np.asarray(res.params, float)
+    # back to raw units: gains and cross terms scale by k / g, biases by k and shift by c_s
     T = np.concatenate([np.full(6, k / g), np.full(3, k)])
-    params = pn * T
+    params = np.asarray(res.params, float) * T
     params[6:9] += c_s
-    cov_n = np.asarray(res.covariance, float)
-    cov = cov_n * np.outer(T, T)
+    cov = np.asarray(res.covariance, float) * np.outer(T, T)
     se_n = np.asarray(res.stderr, float)  # in units of g (unit-radius fit)
     stderr = se_n * T
     corr = np.asarray(res.correlation, float)
     condition = float(res.condition)
     solver_status = int(res.status)
-
-    # status
-    status = fit_status(solver_status, bool(np.all(np.isfinite(params))))
-    free = np.asarray(MODELS[model])
-    poor = [
-        PARAM_NAMES[i]
-        for i in range(9)
-        if free[i] and (not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR)
-    ]
-    hi_corr = [
-        f"{PARAM_NAMES[i]}~{PARAM_NAMES[j]} ({corr[i, j]:+.4f})"
-        for i in range(9)
-        for j in range(i + 1, 9)
-        if free[i] and free[j] and abs(corr[i, j]) > 0.999
-    ]
-    if hi_corr:
-        warn.append("nearly collinear parameters: " + ", ".join(hi_corr))
-    if not np.isfinite(condition) or condition > POOR_CONDITION:
-        warn.append(f"the normal equations are ill-conditioned (condition {condition:.3g})")
-    if status == "ok" and (poor or not np.isfinite(condition) or condition > POOR_CONDITION):
-        status = "poorly_determined"
-        if poor:
-            warn.append(
-                "poorly determined (std. error above 1 % of g): "
-                + ", ".join(poor)
-                + "; add poses that cover the sphere"
-            )
+    status, poor = _status(solver_status, params, se_n, corr, condition, model, warn)
 
     # errors before/after over interval means, noise floor from within-interval scatter
     x_static = x[report.mask & obs.valid]
@@ -538,6 +464,100 @@ def calibrate_accel(
             stacklevel=2,
         )
     return cal
+
+
+def _resolve_units(units: str, n_intervals: int, static_norm: float, fit_norm: float) -> str:
+    """The input unit: the one the static norm fits ("auto"), or the declared one checked
+    against it (counts have any scale); a ValueError saying which unit the data look like."""
+    detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
+    if units == "auto":
+        if detected is None:
+            raise ValueError(
+                f"the {n_intervals} static means have median norm {static_norm:.4g} "
+                f"(radius {fit_norm:.4g} about their fitted centre), which fits none of the "
+                f"units considered ({_UNIT_RANGES}); pass units= (--units counts|g|m/s^2)"
+            )
+        return detected
+    if detected != units and units != "counts":
+        raise ValueError(
+            f"units={units!r}, but the static readings have norm {static_norm:.4g}, which looks "
+            f"like {detected or 'no known unit'} ({_UNIT_RANGES}); pass --units "
+            f"{detected or 'counts'} (or fix the scaling of the log)"
+        )
+    return units
+
+
+def _reference_magnitude(
+    g: float | None, units: str, static_norm: float, output_units: str | None
+) -> float:
+    """g in output units: given, or 1 (g, counts) / 9.80665 (m/s^2). A given g off the data's
+    unit (m/s^2 data with g = 1) would silently rescale the output, so it is refused unless
+    ``output_units`` states the conversion."""
+    if g is None:
+        g = G_STANDARD if units == "m/s^2" else 1.0
+    elif output_units is None:
+        from .batch import check_reference_magnitude
+
+        try:
+            check_reference_magnitude(g, units, static_norm)
+        except ValueError as exc:
+            raise ValueError(f"{exc}; or give the output unit (--out-units) to convert") from None
+    if g <= 0 or not np.isfinite(g):
+        raise ValueError(f"g must be a positive number, got {g}")
+    return g
+
+
+def _coverage_warnings(pts: np.ndarray, c_s: np.ndarray, n_free: int) -> list[str]:
+    """What the poses' spread leaves poorly determined (a ValueError when they lie in one
+    plane): one hemisphere only, or hardly more fit points than parameters."""
+    warn = []
+    dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
+    flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
+    _check_plane(flatness, normal)
+    if min_cos > -0.05:
+        warn.append(
+            f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
+            "are correlated and poorly determined; add poses from the opposite side"
+        )
+    if len(pts) - n_free < 3:
+        warn.append(
+            f"{len(pts)} fit points for {n_free} parameters: almost no redundancy, so the "
+            "standard errors and the residual say little; fit the samples (use='samples') or "
+            "record more poses"
+        )
+    return warn
+
+
+def _status(solver_status, params, se_n, corr, condition, model, warn) -> tuple[str, list[str]]:
+    """The record's status word and the poorly determined parameters; appends the reasons
+    (collinear parameters, ill-conditioning, large standard errors) to ``warn``."""
+    status = fit_status(solver_status, bool(np.all(np.isfinite(params))))
+    free = np.asarray(MODELS[model])
+    poor = [
+        PARAM_NAMES[i]
+        for i in range(9)
+        if free[i] and (not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR)
+    ]
+    hi_corr = [
+        f"{PARAM_NAMES[i]}~{PARAM_NAMES[j]} ({corr[i, j]:+.4f})"
+        for i in range(9)
+        for j in range(i + 1, 9)
+        if free[i] and free[j] and abs(corr[i, j]) > 0.999
+    ]
+    if hi_corr:
+        warn.append("nearly collinear parameters: " + ", ".join(hi_corr))
+    ill = not np.isfinite(condition) or condition > POOR_CONDITION
+    if ill:
+        warn.append(f"the normal equations are ill-conditioned (condition {condition:.3g})")
+    if status == "ok" and (poor or ill):
+        status = "poorly_determined"
+        if poor:
+            warn.append(
+                "poorly determined (std. error above 1 % of g): "
+                + ", ".join(poor)
+                + "; add poses that cover the sphere"
+            )
+    return status, poor
 
 
 def interval_errors(

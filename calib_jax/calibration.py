@@ -172,7 +172,7 @@ class AccelCalibration:
         """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for one
         reading (3,), many (N, 3), or a loaded log (:class:`calib_jax.io.SensorLog`: its
         ``acc`` columns)."""
-        return apply_params(self.params, _raw_vectors(raw, "acc"))
+        return apply_params(self.params, _raw_vectors(raw, "accel"))
 
     def __eq__(self, other) -> bool:
         """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
@@ -505,17 +505,11 @@ class _Doc:
         return a
 
 
-def _raw_vectors(raw, attr: str) -> np.ndarray:
-    """(3,) or (N, 3) float array from an array or a loaded log's ``attr`` columns."""
+def _raw_vectors(raw, sensor: str) -> np.ndarray:
+    """(3,) or (N, 3) float array from an array or a loaded log's ``sensor`` columns."""
     from .io.files import SensorLog
 
-    if isinstance(raw, SensorLog):
-        x = getattr(raw, attr)
-        if x is None:
-            cols = {"acc": "ax, ay, az", "mag": "mx, my, mz"}[attr]
-            raise ValueError(f"{raw.path}: the log has no {attr} columns ({cols})")
-        raw = x
-    x = np.asarray(raw, float)
+    x = raw.vectors(sensor) if isinstance(raw, SensorLog) else np.asarray(raw, float)
     if x.ndim not in (1, 2) or x.shape[-1] != 3:
         raise ValueError(
             f"raw must be one reading (3,) or many (N, 3), columns x, y, z; got shape {x.shape}"
@@ -668,7 +662,7 @@ class MagCalibration:
         log (:class:`calib_jax.io.SensorLog`: its ``mag`` columns, ``acc`` for an
         accelerometer fit), in host-side numpy; inside JAX use
         :func:`calib_jax.models.mag.compensate`."""
-        x = _raw_vectors(raw, "acc" if self.sensor == "accel" else "mag")
+        x = _raw_vectors(raw, self.sensor)
         return (x - self.center) @ self.soft_iron.T
 
     def to_params(self):

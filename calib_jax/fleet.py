@@ -44,11 +44,7 @@ def prepare_log(
     """
     if sensor not in SENSORS:
         raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
-    x = log.acc if sensor == "accel" else log.mag
-    if x is None:
-        cols = "ax, ay, az" if sensor == "accel" else "mx, my, mz"
-        raise ValueError(f"{log.path}: no {sensor} columns ({cols}); map them with --columns")
-    x = np.asarray(x, float)
+    x = log.vectors(sensor)
     info: dict = {"samples": len(x)}
     if sensor == "mag":
         valid, notes = screen_samples(x, "mag")

@@ -218,11 +218,7 @@ def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str]
         x = np.asarray(data, float)
         source, notes = None, []
     else:
-        x = data.mag if sensor == "mag" else data.acc
-        if x is None:
-            cols = "mx, my, mz" if sensor == "mag" else "ax, ay, az"
-            raise ValueError(f"{data.path}: no {sensor} columns ({cols}); map them with --columns")
-        x, source, notes = np.asarray(x, float), data.path, list(data.notes)
+        x, source, notes = data.vectors(sensor), data.path, list(data.notes)
     if x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"{sensor} data must be (samples, 3), got shape {x.shape}")
     return x, source, notes

@@ -875,11 +875,7 @@ def _load(data, sensor):
 
         data = load_log(data)
     if isinstance(data, SensorLog):
-        x = data.acc if sensor == "accel" else data.mag
-        if x is None:
-            cols = "ax, ay, az" if sensor == "accel" else "mx, my, mz"
-            raise ValueError(f"{data.path}: no {sensor} columns ({cols}); map them with columns=")
-        return np.asarray(x, float), data.t, data.temp, data.sample_rate, data.path
+        return data.vectors(sensor), data.t, data.temp, data.sample_rate, data.path
     return np.asarray(data, float), None, None, None, None
 
 

@@ -119,6 +119,17 @@ class SensorLog:
                 return len(a)
         return 0
 
+    def vectors(self, sensor: str) -> np.ndarray:
+        """The (N, 3) float readings of ``sensor`` ("accel" or "mag"); a ValueError naming
+        the file and the columns to map when the log has none."""
+        x = {"accel": self.acc, "mag": self.mag}[sensor]
+        if x is None:
+            cols = "ax, ay, az" if sensor == "accel" else "mx, my, mz"
+            raise ValueError(
+                f"{self.path}: the log has no {sensor} columns ({cols}); map them with --columns"
+            )
+        return np.asarray(x, float)
+
 
 def parse_columns(spec: str | dict[str, str] | list[str] | None) -> dict[str, str] | None:
     """Parse a ``--columns`` mapping.
