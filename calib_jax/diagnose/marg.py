@@ -132,6 +132,74 @@ def _null_series(a_full, m_full, tm, R, dt, theta, eps_obs, t_obs, rng, L):
     return np.stack([np.interp(tm - dt, tm, back[:, k]) for k in range(3)], axis=1)
 
 
+def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best) -> dict:
+    """One candidate's round entry: its fit (``fits[i]``), the two halves' fits after it and
+    its null fits after those, against the current model ``cur`` and the null baselines'
+    BIC ``nb``; accepted when every test passes."""
+    fit, h1, h2 = fits[i], fits[i + 1], fits[i + 2]
+    dbic = cur["bic"] - fit["bic"]
+    null_gain = max(nb[k] - fits[i + 3 + k]["bic"] for k in range(NULL_SIMS))
+    sl = SLOTS[c]
+    zh = np.abs(h1["theta"][sl] - h2["theta"][sl]) / np.sqrt(
+        h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2
+    )
+    rot = math.degrees(float(np.linalg.norm(fit["theta"][:3])))
+    plaus = rot <= BOUNDS["rotation_deg"] and abs(fit["theta"][4]) <= BOUNDS["dt_s"]
+    tests = {
+        "converged": fit["converged"],
+        "bic": dbic > BIC_MIN,
+        "loo": 1 - fit["loo_rms"] / cur["loo_rms"] > LOO_GAIN,
+        "halves": bool(np.all(np.isfinite(zh)) and np.max(zh) < HALVES_Z),
+        "null": dbic > null_gain,
+        "plausible": bool(plaus),
+    }
+    entry = {
+        "effect": c,
+        "accepted": all(tests.values()),
+        "delta_bic": dbic,
+        "loo_gain": 1 - fit["loo_rms"] / cur["loo_rms"],
+        "halves_max_z": float(np.max(zh)),
+        "null_max_delta_bic": null_gain,
+        "rms": fit["rms"],
+        "loo_rms": fit["loo_rms"],
+        "tests": tests,
+    }
+    if c == "sensor_misalignment":
+        entry["permutation"] = describe_permutation(P_best)
+        entry["rotation_deg"] = rot
+    else:
+        entry["dt_s"] = float(fit["theta"][4])
+    return entry
+
+
+def _coefficients(c: str, fit: dict, P) -> dict:
+    """An accepted effect's coefficients for its step: the rotation (after the axis map P) or
+    the time offset, with standard errors."""
+    if c == "sensor_misalignment":
+        return {
+            "permutation": describe_permutation(P),
+            "rotvec_deg": np.degrees(fit["theta"][:3]),
+            "rotvec_stderr_deg": np.degrees(fit["stderr"][:3]),
+        }
+    return {"dt_s": float(fit["theta"][4]), "dt_stderr_s": float(fit["stderr"][4])}
+
+
+def _angle_floors(A, Afn, Mn, sample_rate, ok) -> tuple[float, float, str]:
+    """(white, Allan, note): the gravity-field angle's noise floors over the longest rest,
+    or, without a rest, a white floor from first differences and no Allan floor."""
+    rep = detect_rest(A, sample_rate=sample_rate, valid=ok)
+    if rep.intervals:
+        iv = max(rep.intervals, key=lambda v: v.n)
+        rest = _angles(Afn[iv.start : iv.stop], Mn[iv.start : iv.stop])
+        tr = np.arange(len(rest)) / len(rest)
+        white = float(np.std(rest - np.polyval(np.polyfit(tr, rest, 2), tr), ddof=3))
+        return white, allan_deviation(rest, 1), f"floors from the longest rest ({iv.n} samples)"
+    d = np.diff(_angles(Afn, Mn))
+    white = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
+    note = "no rest in the log: white floor from first differences, no Allan floor"
+    return white, float("nan"), note
+
+
 def diagnose_marg(
     acc: np.ndarray,
     mag: np.ndarray,
@@ -235,85 +303,25 @@ def diagnose_marg(
         rows += [(th, nm, P_cur, w, free) for nm in nulls]
         fits = _run(rows, a, tob, tm)
         nb = [f["bic"] for f in fits[nb0:]]
-        log, best = [], None
-        for c in remaining:
-            i = idx[c]
-            fit, h1, h2 = fits[i], fits[i + 1], fits[i + 2]
-            dbic = cur["bic"] - fit["bic"]
-            null_gain = max(nb[k] - fits[i + 3 + k]["bic"] for k in range(NULL_SIMS))
-            sl = SLOTS[c]
-            zh = np.abs(h1["theta"][sl] - h2["theta"][sl]) / np.sqrt(
-                h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2
-            )
-            rot = math.degrees(float(np.linalg.norm(fit["theta"][:3])))
-            plaus = rot <= BOUNDS["rotation_deg"] and abs(fit["theta"][4]) <= BOUNDS["dt_s"]
-            tests = {
-                "converged": fit["converged"],
-                "bic": dbic > BIC_MIN,
-                "loo": 1 - fit["loo_rms"] / cur["loo_rms"] > LOO_GAIN,
-                "halves": bool(np.all(np.isfinite(zh)) and np.max(zh) < HALVES_Z),
-                "null": dbic > null_gain,
-                "plausible": bool(plaus),
-            }
-            entry = {
-                "effect": c,
-                "accepted": all(tests.values()),
-                "delta_bic": dbic,
-                "loo_gain": 1 - fit["loo_rms"] / cur["loo_rms"],
-                "halves_max_z": float(np.max(zh)),
-                "null_max_delta_bic": null_gain,
-                "rms": fit["rms"],
-                "loo_rms": fit["loo_rms"],
-                "tests": tests,
-            }
-            if c == "sensor_misalignment":
-                entry["permutation"] = describe_permutation(P_best)
-                entry["rotation_deg"] = rot
-            else:
-                entry["dt_s"] = float(fit["theta"][4])
-            log.append(entry)
-            if entry["accepted"] and (best is None or dbic > best[1]):
-                best = (c, dbic, fit)
+        log = [_judge(c, fits, idx[c], nb, cur, P_best) for c in remaining]
         rounds.append(log)
-        if best is None:
+        accepted = [e for e in log if e["accepted"]]
+        if not accepted:
             break
-        c, _, fit = best
-        cur = fit
+        c = max(accepted, key=lambda e: e["delta_bic"])["effect"]
+        cur = fits[idx[c]]
         free[SLOTS[c]] = True
         if c == "sensor_misalignment":
             P_cur = P_best
         effects.append(c)
         remaining.remove(c)
-        steps.append(_step("+".join(["base", *effects]), fit, 0, effect=c))
-        st = steps[-1]
-        if c == "sensor_misalignment":
-            st["coefficients"] = {
-                "permutation": describe_permutation(P_cur),
-                "rotvec_deg": np.degrees(fit["theta"][:3]),
-                "rotvec_stderr_deg": np.degrees(fit["stderr"][:3]),
-            }
-        else:
-            st["coefficients"] = {
-                "dt_s": float(fit["theta"][4]),
-                "dt_stderr_s": float(fit["stderr"][4]),
-            }
+        steps.append(_step("+".join(["base", *effects]), cur, 0, effect=c))
+        steps[-1]["coefficients"] = _coefficients(c, cur, P_cur)
     # floors: the angle over the longest rest, with the final model's rotation
     R_fin = np.asarray(rotvec_to_dcm(jnp.asarray(cur["theta"][:3] * free[:3]))) @ P_cur
     Mn = Mn @ R_fin.T
-    rep = detect_rest(A, sample_rate=sample_rate, valid=ok)
-    ang_full = _angles(Afn, Mn)
-    if rep.intervals:
-        iv = max(rep.intervals, key=lambda v: v.n)
-        rest = _angles(Afn[iv.start : iv.stop], Mn[iv.start : iv.stop])
-        tr = np.arange(len(rest)) / len(rest)
-        white = float(np.std(rest - np.polyval(np.polyfit(tr, rest, 2), tr), ddof=3))
-        allan = allan_deviation(rest, 1)
-        notes.append(f"floors from the longest rest ({iv.n} samples)")
-    else:
-        d = np.diff(ang_full)
-        white = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
-        allan = float("nan")
-        notes.append("no rest in the log: white floor from first differences, no Allan floor")
+    white, allan, note = _angle_floors(A, Afn, Mn, sample_rate, ok)
+    notes.append(note)
     floor = float(np.nanmax([white, allan]))
 
     rms_before = base["rms"]
