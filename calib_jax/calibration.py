@@ -32,8 +32,50 @@ class FitStatusWarning(UserWarning):
     read the status yourself (``warnings.simplefilter("ignore", FitStatusWarning)``)."""
 
 
+class Record:
+    """What every result record shares (accel, ellipsoid, marg, batch, diagnosis): its
+    ``kind`` (written in its JSON), an atomic :meth:`save`, a :meth:`load` whose errors name
+    the file, a loader that refuses another kind by name, and ``==`` (not hashable: records
+    hold arrays). Subclasses give ``kind``, ``what``, ``to_dict`` and ``from_dict(d, source)``.
+    """
+
+    kind: ClassVar[str]
+    what: ClassVar[str]
+    """How a refusal names the kind, e.g. "an accelerometer calibration"."""
+
+    def save(self, path: str | Path) -> None:
+        """Write the JSON atomically (:func:`write_json_atomic`): a full disk leaves the old
+        file (or none), never a truncated one."""
+        write_json_atomic(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | Path):
+        """Read a saved record; a ValueError names the file, the key and the fault."""
+        return cls.from_dict(_read_json(path), source=path)
+
+    @classmethod
+    def _check_kind(cls, d: dict, where: str, legacy: bool = True) -> None:
+        """Refuse a file of another kind by name (``legacy``: files written before 'kind'
+        was, which have none, are this kind)."""
+        kind = d.get("kind", cls.kind if legacy else None)
+        if kind != cls.kind:
+            raise ValueError(
+                f"{where}not {cls.what}: kind is {kind!r} (each kind loads with its class: "
+                "AccelCalibration, MagCalibration, MARGRecord, BatchRecord, Diagnosis; "
+                "calib_jax.export.read reads any calibration)"
+            )
+
+    def __eq__(self, other) -> bool:
+        """Equal records write the same JSON."""
+        if type(other) is not type(self):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
 @dataclass(frozen=True, eq=False)
-class AccelCalibration:
+class AccelCalibration(Record):
     """Outcome of :func:`calib_jax.calibrate_accel`.
 
     ``status`` is "ok", "poorly_determined" (converged, but some parameter is not pinned down
@@ -41,8 +83,7 @@ class AccelCalibration:
     """
 
     kind: ClassVar[str] = "accel"
-    """The JSON's ``kind``: every record names what it holds (accel, ellipsoid, marg, batch,
-    diagnosis), and each loader refuses the others by name."""
+    what: ClassVar[str] = "an accelerometer calibration"
     params: np.ndarray
     """Paper 1's p = [alpha_x, alpha_y, alpha_z, S_xy, S_xz, S_yz, beta_x, beta_y, beta_z]."""
     stderr: np.ndarray
@@ -178,8 +219,6 @@ class AccelCalibration:
         """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
         return _fields_equal(self, other)
 
-    __hash__ = None  # type: ignore[assignment]  # holds arrays
-
     # ---- report ----------------------------------------------------------------------------
     def __repr__(self) -> str:
         from .display import accel_repr
@@ -262,11 +301,6 @@ class AccelCalibration:
         # the JSON standard has no inf/nan: write them as strings, read back by float()
         return _sanitize(d)
 
-    def save(self, path: str | Path) -> None:
-        """Write the JSON atomically (:func:`write_json_atomic`): a full disk leaves the old
-        file (or none), never a truncated one."""
-        write_json_atomic(path, self.to_dict())
-
     @classmethod
     def from_dict(cls, d: object, source: str | Path | None = None) -> AccelCalibration:
         """Rebuild from :meth:`to_dict`'s layout, validated: a ValueError names ``source``
@@ -274,11 +308,7 @@ class AccelCalibration:
         gain, a singular gain matrix, a non-positive g)."""
         r = _Doc(d, source)
         _check_version(r.d, r.where)
-        if r.d.get("kind", "accel") != "accel":  # files before 'kind' was written have none
-            raise ValueError(
-                f"{r.where}not an accelerometer calibration: kind is {r.d.get('kind')!r} (load "
-                "any calibration with calib_jax.export.read)"
-            )
+        cls._check_kind(r.d, r.where)
         if r.d.get("model") not in MODELS:
             raise ValueError(
                 f"{r.where}not an accelerometer calibration: model is {r.d.get('model')!r}"
@@ -332,11 +362,6 @@ class AccelCalibration:
             source=r.text("source", optional=True),
             model=r.d["model"],
         )
-
-    @classmethod
-    def load(cls, path: str | Path) -> AccelCalibration:
-        """Read a saved calibration; a ValueError names the file, the key and the fault."""
-        return cls.from_dict(_read_json(path), source=path)
 
 
 def linear_forms(*, offset, forward=None, correction=None) -> dict:
@@ -598,7 +623,7 @@ _field = field  # MagCalibration has an attribute named field
 
 
 @dataclass(frozen=True, eq=False)
-class MagCalibration:
+class MagCalibration(Record):
     """Outcome of :func:`calib_jax.calibrate_mag`: y = W (raw - center), |y| = radius.
 
     ``status`` is "ok", "poorly_determined", "not_converged" or "failed" (as for
@@ -608,6 +633,7 @@ class MagCalibration:
     """
 
     kind: ClassVar[str] = "ellipsoid"
+    what: ClassVar[str] = "an ellipsoid calibration"
     center: np.ndarray
     """Hard-iron offset (bias), raw units."""
     soft_iron: np.ndarray
@@ -742,8 +768,6 @@ class MagCalibration:
         """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
         return _fields_equal(self, other)
 
-    __hash__ = None  # type: ignore[assignment]  # holds arrays
-
     def __repr__(self) -> str:
         from .display import mag_repr
 
@@ -830,21 +854,17 @@ class MagCalibration:
             }
         )
 
-    def save(self, path: str | Path) -> None:
-        """Write the JSON atomically (:func:`write_json_atomic`): a full disk leaves the old
-        file (or none), never a truncated one."""
-        write_json_atomic(path, self.to_dict())
-
     @classmethod
     def from_dict(cls, d: object, source: str | Path | None = None) -> MagCalibration:
         """Rebuild from :meth:`to_dict`'s layout, validated as :meth:`AccelCalibration.from_dict`
         (centre and W finite, W invertible, radius and field positive)."""
         r = _Doc(d, source)
         _check_version(r.d, r.where)
-        if r.d.get("kind") != "ellipsoid" or r.d.get("model") not in MAG_MODELS:
+        cls._check_kind(r.d, r.where, legacy=False)
+        if r.d.get("model") not in MAG_MODELS:
             raise ValueError(
-                f"{r.where}not an ellipsoid calibration (kind {r.d.get('kind')!r}, model "
-                f"{r.d.get('model')!r}); load accelerometer files with AccelCalibration.load"
+                f"{r.where}not an ellipsoid calibration: model is {r.d.get('model')!r}, not one "
+                f"of {MAG_MODELS}"
             )
         W = r.arr("soft_iron", (3, 3))
         if not np.linalg.cond(W) < 1e12:
@@ -887,18 +907,13 @@ class MagCalibration:
             source=r.text("source", optional=True),
         )
 
-    @classmethod
-    def load(cls, path: str | Path) -> MagCalibration:
-        """Read a saved calibration; a ValueError names the file, the key and the fault."""
-        return cls.from_dict(_read_json(path), source=path)
-
 
 _TEXT_KEYS = ("path", "status", "message", "units", "use", "notes", "warnings")
 """Batch entry keys holding text: a file named 'nan' stays a name."""
 
 
 @dataclass(frozen=True, eq=False)
-class BatchRecord:
+class BatchRecord(Record):
     """Many sensors' calibrations, one entry per log: what :func:`calib_jax.fleet.calibrate_files`
     yields and ``calib-jax batch --json`` writes, and :meth:`calib_jax.BatchResult.to_record`
     gives for an in-memory batch.
@@ -911,6 +926,7 @@ class BatchRecord:
     """
 
     kind: ClassVar[str] = "batch"
+    what: ClassVar[str] = "a batch of calibrations"
     sensor: str
     """'accel' or 'mag'."""
     entries: list[dict]
@@ -958,8 +974,6 @@ class BatchRecord:
         """Field by field; NaN equal to NaN."""
         return _fields_equal(self, other)
 
-    __hash__ = None  # type: ignore[assignment]  # holds lists
-
     def to_dict(self) -> dict:
         return {
             "format_version": self.format_version,
@@ -968,10 +982,6 @@ class BatchRecord:
             "results": _sanitize(self.entries),
         }
 
-    def save(self, path: str | Path) -> None:
-        """Write the JSON atomically (:func:`write_json_atomic`)."""
-        write_json_atomic(path, self.to_dict())
-
     @classmethod
     def from_dict(cls, d: object, source: str | Path | None = None) -> BatchRecord:
         """Rebuild from :meth:`to_dict`'s layout (also ``calib-jax batch --json`` files written
@@ -979,11 +989,7 @@ class BatchRecord:
         fault."""
         r = _Doc(d, source)
         _check_version(r.d, r.where)
-        if r.d.get("kind", "batch") != "batch":
-            raise ValueError(
-                f"{r.where}not a batch of calibrations: kind is {r.d.get('kind')!r} (load it "
-                "with that kind's class, e.g. AccelCalibration.load)"
-            )
+        cls._check_kind(r.d, r.where)
         sensor = r.text("sensor")
         if sensor not in ("accel", "mag"):
             raise ValueError(f"{r.where}key 'sensor' must be 'accel' or 'mag', got {sensor!r}")
@@ -1007,8 +1013,3 @@ class BatchRecord:
             {k: v if k in _TEXT_KEYS else _unsanitize(v) for k, v in e.items()} for e in results
         ]
         return cls(sensor=sensor, entries=entries, format_version=r.d["format_version"])
-
-    @classmethod
-    def load(cls, path: str | Path) -> BatchRecord:
-        """Read a saved batch; a ValueError names the file, the entry and the fault."""
-        return cls.from_dict(_read_json(path), source=path)

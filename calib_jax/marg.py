@@ -30,10 +30,9 @@ from .calibration import (
     AccelCalibration,
     FitStatusWarning,
     MagCalibration,
-    _read_json,
+    Record,
     _sanitize,
     _unsanitize,
-    write_json_atomic,
 )
 from .mag import calibrate_mag
 from .models import layout
@@ -155,7 +154,7 @@ ACCEL_METHODS = ("auto", "static", "ellipsoid", "none")
 
 
 @dataclass(frozen=True, eq=False)
-class MARGRecord:
+class MARGRecord(Record):
     """One MARG calibration of one log: what ``calib-jax marg`` prints and writes.
 
     Frames: ``R_mag_to_acc`` takes magnetometer-frame vectors into the accelerometer frame,
@@ -166,6 +165,7 @@ class MARGRecord:
     """
 
     kind: ClassVar[str] = "marg"
+    what: ClassVar[str] = "a MARG calibration"
 
     accel: AccelCalibration | MagCalibration | None
     """Paper 1's model (``accel_method="static"``), the accelerometer's own ellipsoid
@@ -329,19 +329,15 @@ class MARGRecord:
             }
         )
 
-    def save(self, path: str | Path) -> None:
-        write_json_atomic(path, self.to_dict())
-
     @classmethod
-    def from_dict(cls, d: dict) -> MARGRecord:
-        if d.get("kind") != cls.kind:
-            raise ValueError(
-                f"not a MARG calibration (kind {d.get('kind')!r}); load accelerometer files "
-                "with AccelCalibration.load and ellipsoid files with MagCalibration.load"
-            )
+    def from_dict(cls, d: dict, source: str | Path | None = None) -> MARGRecord:
+        where = f"{source}: " if source else ""
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}a MARG file holds a JSON object, got {type(d).__name__}")
+        cls._check_kind(d, where, legacy=False)
         if d.get("format_version") not in (1, MARG_FORMAT_VERSION):  # 1: no plane alignment
             raise ValueError(
-                f"MARG format_version {d.get('format_version')!r} is not supported (this "
+                f"{where}MARG format_version {d.get('format_version')!r} is not supported (this "
                 f"calib_jax reads versions 1 to {MARG_FORMAT_VERSION})"
             )
         planes = {
@@ -378,17 +374,6 @@ class MARGRecord:
             acc_plane=planes["accel"],
             mag_plane=planes["mag"],
         )
-
-    @classmethod
-    def load(cls, path: str | Path) -> MARGRecord:
-        return cls.from_dict(_read_json(path))
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, MARGRecord):
-            return NotImplemented
-        return self.to_dict() == other.to_dict()
-
-    __hash__ = None  # type: ignore[assignment]
 
 
 STATIC_RMS_LIMIT = 1e-2

@@ -37,6 +37,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import stats
 
+from ..calibration import Record
 from ..io.files import SensorLog
 from ..lm import is_converged
 from ..models.layout import ALPHA_ENTRIES
@@ -289,11 +290,12 @@ _JSON_FIELDS = (
 _FLOAT_FIELDS = "rms_before rms_after noise_floor noise_floor_white noise_floor_allan".split()
 
 
-@dataclass
-class Diagnosis:
+@dataclass(eq=False)
+class Diagnosis(Record):
     """The loop's outcome; :meth:`to_dict` is the ``calib-jax diagnose --json`` content."""
 
     kind: ClassVar[str] = "diagnosis"
+    what: ClassVar[str] = "a diagnosis"
     sensor: str
     verdict: str  # "at_floor", "effects_added", "unexplained_structure", "not_possible"
     steps: list[dict]
@@ -329,12 +331,6 @@ class Diagnosis:
         head = {"kind": self.kind, "format_version": DIAGNOSIS_FORMAT_VERSION}
         return head | _jsonable({k: getattr(self, k) for k in _JSON_FIELDS})
 
-    def save(self, path) -> None:
-        """Write :meth:`to_dict` as JSON (atomically: a crash leaves the old file)."""
-        from ..calibration import write_json_atomic
-
-        write_json_atomic(path, self.to_dict())
-
     @classmethod
     def from_dict(cls, d: object, source=None) -> Diagnosis:
         """Rebuild from :meth:`to_dict`'s layout (without the report's arrays); a ValueError
@@ -343,11 +339,7 @@ class Diagnosis:
         where = f"{source}: " if source else ""
         if not isinstance(d, dict):
             raise ValueError(f"{where}a diagnosis file holds a JSON object, got {type(d).__name__}")
-        if d.get("kind", "diagnosis") != "diagnosis":
-            raise ValueError(
-                f"{where}not a diagnosis (kind {d.get('kind')!r}); calibrations load with "
-                "calib_jax.export.read"
-            )
+        cls._check_kind(d, where)
         version = d.get("format_version", 1)
         if version != DIAGNOSIS_FORMAT_VERSION:
             raise ValueError(
@@ -367,18 +359,6 @@ class Diagnosis:
         ):
             kw[k] = float("nan") if kw[k] is None else float(kw[k])
         return cls(**kw)
-
-    @classmethod
-    def load(cls, path) -> Diagnosis:
-        from ..calibration import _read_json
-
-        return cls.from_dict(_read_json(path), source=path)
-
-    def __eq__(self, other) -> bool:
-        """Equal records: the same JSON (the report's arrays are not compared)."""
-        return isinstance(other, Diagnosis) and self.to_dict() == other.to_dict()
-
-    __hash__ = None  # type: ignore[assignment]
 
     def _repr_html_(self) -> str:
         from ..display import diagnosis_html
