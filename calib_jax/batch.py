@@ -175,24 +175,9 @@ class BatchResult(eqx.Module):
     def entries(self, names: Sequence | None = None) -> list[dict]:
         """One :class:`calib_jax.BatchRecord` entry per sensor (``names`` labels them, e.g.
         their files; default the index)."""
-        params, stderr = np.asarray(self.params), np.asarray(self.stderr)
-        out = []
-        for i, code in enumerate(int(s) for s in np.asarray(self.status)):
-            out.append(
-                {
-                    "path": names[i] if names is not None else i,
-                    "status": fit_status(code),
-                    "solver_status": code,
-                    "message": status_message(code),
-                    "params": params[i].tolist(),
-                    "stderr": stderr[i].tolist(),
-                    "rms": float(self.rms[i]),
-                    "iterations": int(self.iterations[i]),
-                    "n_points": int(self.n_samples[i]),
-                    **_linear_forms(params[i]),
-                }
-            )
-        return out
+        return batch_entries(
+            self.status, self.params, self.stderr, self.rms, self.iterations, self.n_samples, names
+        )
 
     def to_record(self, names: Sequence | None = None) -> BatchRecord:
         """The batch as a record that saves, loads and compares (:class:`calib_jax.BatchRecord`)."""
@@ -228,6 +213,30 @@ class BatchResult(eqx.Module):
         ok = int(self.success.sum())
         n = len(self.success)
         return f"<b>BatchResult</b>: {ok} of {n} sensors converged" + rows_html(self.rows())
+
+
+def batch_entries(status, params, stderr, rms, iterations, n_points, names=None) -> list[dict]:
+    """The :class:`calib_jax.BatchRecord` entries of stacked fits (one row per sensor of each
+    array; ``names`` label them, default the index): the one entry layout of the batch, the
+    fleet, the recorder and the pipeline's fit_batch."""
+    params, stderr = np.asarray(params, float), np.asarray(stderr, float)
+    out = []
+    for i, code in enumerate(int(s) for s in np.asarray(status)):
+        out.append(
+            {
+                "path": names[i] if names is not None else i,
+                "status": fit_status(code, bool(np.all(np.isfinite(params[i])))),
+                "solver_status": code,
+                "message": status_message(code),
+                "params": params[i].tolist(),
+                "stderr": stderr[i].tolist(),
+                "rms": float(np.asarray(rms)[i]),
+                "iterations": int(np.asarray(iterations)[i]),
+                "n_points": int(np.asarray(n_points)[i]),
+                **_linear_forms(params[i]),
+            }
+        )
+    return out
 
 
 def _linear_forms(p: np.ndarray) -> dict:

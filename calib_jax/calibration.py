@@ -963,6 +963,31 @@ class BatchRecord(Record):
                 out[e["path"]] = MagParams.from_vector(p)
         return out
 
+    @classmethod
+    def from_fit(cls, fit, n_points, names=None) -> BatchRecord:
+        """The record of a :func:`calib_jax.pipeline.fit_batch` result (a Fit whose leaves have
+        a sensor axis), to save, load and export like ``calib-jax batch``'s. ``n_points``: the
+        samples each sensor was fitted to (its weights' nonzero count), one number or one per
+        sensor. ``rms`` is the pipeline's, in the unit of the magnitude it was given."""
+        import jax
+        from jax.flatten_util import ravel_pytree
+
+        from .batch import batch_entries
+
+        params = jax.vmap(lambda p: ravel_pytree(p)[0])(fit.params)
+        sensor = "accel" if params.shape[-1] == 9 else "mag"
+        k = len(params)
+        entries = batch_entries(
+            fit.status,
+            params,
+            fit.stderr,
+            fit.rms,
+            fit.iterations,
+            np.broadcast_to(np.asarray(n_points), (k,)),
+            names,
+        )
+        return cls(sensor=sensor, entries=entries)
+
     def to_dataframe(self):
         """One row per entry, the parameters by name (pandas; see
         :func:`calib_jax.display.fleet_rows`)."""

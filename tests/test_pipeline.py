@@ -489,3 +489,23 @@ def test_pipeline_fits_become_records_that_round_trip(fits, tmp_path):
     np.testing.assert_allclose(mag.stderr_soft_iron, ref.stderr_soft_iron, rtol=1e-6)
     np.testing.assert_allclose(mag.stderr_center, ref.stderr_center, rtol=1e-6)
     np.testing.assert_allclose(mag.semi_axes, ref.semi_axes, rtol=1e-6)
+
+
+def test_a_pipeline_batch_becomes_a_batch_record(tmp_path):
+    """fit_batch's stacked Fit becomes the BatchRecord that calib-jax batch writes
+    (BatchRecord.from_fit): it saves, loads, compares equal, and its to_params gives each
+    sensor's pytree back exactly; a sensor the fit could not calibrate is 'failed' and left
+    out of to_params."""
+    raw = np.stack([ACC, ACC[::-1] * 1.01, np.full_like(ACC, np.nan)])
+    fb = pl.fit_batch(pl.fit_accel, jnp.asarray(raw), 1.0)
+    rec = cj.BatchRecord.from_fit(fb, len(ACC), names=["a", "b", "nan"])
+    assert [e["status"] for e in rec.entries] == ["ok", "ok", "failed"]
+    rec.save(tmp_path / "b.json")
+    assert cj.BatchRecord.load(tmp_path / "b.json") == rec
+    back = rec.to_params()
+    assert sorted(back) == ["a", "b"]
+    for k, name in enumerate(("a", "b")):
+        np.testing.assert_array_equal(
+            np.asarray(back[name].to_vector()), np.asarray(fb.params.to_vector())[k]
+        )
+    assert "correction" in rec.entries[0] and "correction" not in rec.entries[2]
