@@ -29,8 +29,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..linalg import det3, inv3
+from ..linalg import det3
 from ..lm import lm_solve
+from ..models.accel import correct
 from ..models.layout import ALPHA_INDEX
 from ..runtime import disk_jit
 
@@ -78,11 +79,13 @@ def base_alpha(theta, free, xp=jnp):
 
 
 def calibrated(theta, free, x, tau, temp):
-    """The calibrated vector y (3,) of one observation (see the module docstring)."""
+    """The calibrated vector y (3,) of one observation (see the module docstring): paper 1's
+    correction (:func:`calib_jax.models.accel.correct`, the model every fit uses) with the
+    bias moved by the drift and temperature terms, then the gain(T) and nonlinearity effects."""
     th = jnp.where(free, theta, 0.0)
-    alpha = base_alpha(theta, free)
+    g = jnp.where(free[0:3], theta[0:3], theta[0])  # the sphere's gains follow gain 1
     b = th[6:9] + th[9:12] * tau + th[12:15] * tau**2 + th[15:18] * temp + th[18:21] * temp**2
-    y = inv3(alpha) @ (x - b) / (1.0 + th[21:24] * temp)
+    y = correct(jnp.concatenate([g, th[3:6], b]), x) / (1.0 + th[21:24] * temp)
     return y - th[24:27] * y**2 - th[27:30] * y**3
 
 
