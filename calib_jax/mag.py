@@ -91,6 +91,10 @@ RMS_NO_SHELL_PCT = 12.0
 AXES_RATIO = 4.0
 # data whose squares overflow or underflow float64 (the ellipsoid matrix is 1 / radius^2)
 EXTREME = 1e100
+MOMENT_FORM_ABOVE = 1 << 20
+"""Logs with more samples than this are fitted through their 10 x 10 moment matrix, the batch's
+form of the same chi2 (:mod:`calib_jax.batch`): memory independent of the log's length. Below,
+the LM keeps a residual and a Jacobian row per sample (about 1 kB each per model)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -206,10 +210,49 @@ def _spread(x: np.ndarray) -> tuple[np.ndarray, float]:
 
 def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple):
     """(LMResult, centre, M, relative radial errors (N,), natural radius) of the normalised
-    samples, centre and M as numpy."""
+    samples, centre and M as numpy. Above MOMENT_FORM_ABOVE samples, from their moments."""
+    if len(xn) > MOMENT_FORM_ABOVE:
+        S = jnp.asarray(moments_of(xn))
+        res, c, M, radius = _compiled_moments(solver, model, opts)(S)
+        c, M = np.asarray(c), np.asarray(M)
+        d = xn - c
+        rel = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
+        return res, c, M, rel, float(radius)
     xpad, wpad = pad_rows(xn)
     res, c, M, rel, radius = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
     return res, np.asarray(c), np.asarray(M), np.asarray(rel)[: len(xn)], float(radius)
+
+
+def moments_of(x: np.ndarray, chunk: int = MOMENT_FORM_ABOVE) -> np.ndarray:
+    """geometry.moments of host samples (N, 3), equal weights, summed over chunks of a fixed
+    size (one compilation; the last chunk padded with weight 0): memory of one chunk."""
+    S = np.zeros((10, 10))
+    for i in range(0, len(x), chunk):
+        S += np.asarray(_MOMENTS(*pad_rows(x[i : i + chunk], chunk)))
+    return S
+
+
+_MOMENTS = disk_jit(moments, "geometry.moments")
+
+
+def _fit_from_moments(S, *, solver: str, model: str, **options):
+    """:func:`_fit_measured` from the moment matrix: the batch's solve of the same chi2
+    (residual L' theta(p) with L L' = S), without the per-sample radial errors."""
+    from .batch import _solve, mag_theta
+
+    p0 = ellipsoid_start_moments(S, model)
+    dof = S[9, 9] - N_PARAMS[model]
+    res = _solve(lambda p: mag_theta(p, model), p0, S, dof, solver, options)
+    c, M = unpack(res.params, model)
+    return res, c, M, natural_radius(M)
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled_moments(solver: str, model: str, options: tuple):
+    return disk_jit(
+        functools.partial(_fit_from_moments, solver=solver, model=model, **dict(options)),
+        f"mag.fit_from_moments {solver} {model} {options!r}",
+    )
 
 
 def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str]]:
@@ -267,7 +310,10 @@ def _screened(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, list[str]]:
 
 def _check_not_flat(xn: np.ndarray) -> None:
     """A ValueError when the normalised samples' directions lie in one plane."""
-    cs, _ = sphere_fit_points(xn)
+    if len(xn) > MOMENT_FORM_ABOVE:
+        cs = np.asarray(sphere_fit_moments(jnp.asarray(moments_of(xn)))[0])
+    else:
+        cs, _ = sphere_fit_points(xn)
     d = xn - cs
     dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
     _, min_eig, unseen = sphere_coverage(dirs)

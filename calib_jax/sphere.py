@@ -19,10 +19,14 @@ def sphere_cells(cells: int = 100) -> np.ndarray:
     return np.stack([rz * np.cos(phi), rz * np.sin(phi), z], axis=1)
 
 
-def cell_hits(dirs: np.ndarray, cells: int = 100) -> np.ndarray:
-    """Directions (N, 3) per cell of :func:`sphere_cells` (a count per cell)."""
-    idx = np.argmax(np.asarray(dirs) @ sphere_cells(cells).T, axis=1)
-    return np.bincount(idx, minlength=cells)
+def cell_hits(dirs: np.ndarray, cells: int = 100, chunk: int = 1 << 16) -> np.ndarray:
+    """Directions (N, 3) per cell of :func:`sphere_cells` (a count per cell). In chunks of
+    ``chunk`` directions: the (N, cells) products of a 3-hour 1 kHz log at once were 8.6 GB."""
+    dirs, centres = np.asarray(dirs), sphere_cells(cells)
+    hits = np.zeros(cells, np.int64)
+    for i in range(0, len(dirs), chunk):
+        hits += np.bincount(np.argmax(dirs[i : i + chunk] @ centres.T, axis=1), minlength=cells)
+    return hits
 
 
 def sphere_coverage(dirs: np.ndarray, cells: int = 100) -> tuple[float, float, np.ndarray]:
