@@ -195,7 +195,10 @@ def _vec(v: np.ndarray) -> str:
 def _spread(x: np.ndarray) -> tuple[np.ndarray, float]:
     """Mean and RMS distance from it; a ValueError when float64 cannot resolve the spread."""
     mean = x.mean(axis=0)
-    s = float(np.sqrt(np.mean(np.sum((x - mean) ** 2, axis=1))))
+    # centred squares in chunks: a long log's (N, 3) temporaries were 0.3 GB each
+    step = MOMENT_FORM_ABOVE
+    ss = sum(float(np.sum((x[i : i + step] - mean) ** 2)) for i in range(0, len(x), step))
+    s = float(np.sqrt(ss / len(x)))
     if np.all(x == x[0]):
         raise ValueError("all samples are identical: the sensor did not move or is stuck")
     if not s >= 1e-9 * float(np.max(np.abs(mean))) or not s > 1 / EXTREME:
@@ -291,17 +294,18 @@ def _screened(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, list[str]]:
             f"only {int(finite.sum())} finite samples; an ellipsoid needs many more (record a "
             "slow tumble through all orientations, a few hundred samples at least)"
         )
-    big = np.max(np.abs(x[finite]), axis=1)
-    if big.max() > EXTREME:
+    xf = x if finite.all() else x[finite]  # no copy of a clean log
+    if max(float(xf.max()), -float(xf.min())) > EXTREME:
+        big = np.max(np.abs(xf), axis=1)
         k = int(np.flatnonzero(finite)[np.argmax(big)])
         raise ValueError(
             f"sample {k} holds {big.max():.3g}: values beyond {EXTREME:.0e} cannot be fitted in "
             "float64 (the ellipsoid matrix is 1 / radius^2); convert the data to a physical "
             "unit, or drop the corrupt rows"
         )
-    _spread(x[finite])  # all samples identical (a stuck sensor) is that error, not saturation
+    _spread(xf)  # all samples identical (a stuck sensor) is that error, not saturation
     valid, warn = screen_samples(x, "mag")
-    xv = x[valid]
+    xv = x if valid.all() else x[valid]
     if len(xv) < 20:
         raise ValueError(f"only {len(xv)} unsaturated finite samples; record within range")
     mean, s = _spread(xv)
@@ -314,8 +318,8 @@ def _check_not_flat(xn: np.ndarray) -> None:
         cs = np.asarray(sphere_fit_moments(jnp.asarray(moments_of(xn)))[0])
     else:
         cs, _ = sphere_fit_points(xn)
-    d = xn - cs
-    dirs = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    dirs = xn - cs
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)  # in place
     _, min_eig, unseen = sphere_coverage(dirs)
     if min_eig < FLAT:
         raise ValueError(
@@ -468,10 +472,13 @@ def calibrate_mag(
     # coverage on the calibrated sphere (directions from a sphere fit to distorted data
     # overstate it)
     y = (xv - centre) @ W.T
+    ny = np.linalg.norm(y, axis=1)
     if np.all(np.isfinite(y)):
-        frac, _, unseen = sphere_coverage(y / np.linalg.norm(y, axis=1, keepdims=True))
+        y /= ny[:, None]
+        frac, _, unseen = sphere_coverage(y)
     else:
         frac, unseen = 0.0, np.full(3, np.nan)
+    del y
     if frac < 0.5 and status != "failed":
         warn.append(
             f"the data cover {100 * frac:.0f} % of the sphere of directions (least seen axis "
@@ -482,7 +489,7 @@ def calibrate_mag(
     before = r0 / r0.mean() - 1.0
     nr = np.linalg.norm(xv, axis=1)
     raw_err = nr / nr.mean() - 1.0
-    after = np.linalg.norm((xv - centre) @ W.T, axis=1) / radius - 1.0
+    after = ny / radius - 1.0
     rms_after = float(100 * np.sqrt(np.mean(after**2)))
 
     def full_rms() -> float:

@@ -66,7 +66,7 @@ def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, li
         what = "accelerometer" if sensor == "accel" else "magnetometer"
         raise ValueError(f"no finite {what} samples: every row has NaN or inf")
     what = "accelerometer" if sensor == "accel" else "magnetometer"
-    xf = x[finite]
+    xf = x if finite.all() else x[finite]  # no copy of a clean log
     # one axis constant while the others swing (the board moved): that axis is stuck. A
     # board that never moved, read coarsely, can hold every axis constant: the pose checks
     # then say "one pose", which is the cause
@@ -83,7 +83,7 @@ def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, li
     if n_bad:
         notes.append(f"{n_bad} rows with NaN or inf were left out of the fit")
     valid = finite.copy()
-    for ax, kind, v in saturated_axes(x[finite]):
+    for ax, kind, v in saturated_axes(xf):
         hit = finite & (x[:, ax] == v)
         valid &= ~hit
         notes.append(
