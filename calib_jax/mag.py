@@ -218,9 +218,7 @@ def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple):
         S = jnp.asarray(moments_of(xn))
         res, c, M, radius = _compiled_moments(solver, model, opts)(S)
         c, M = np.asarray(c), np.asarray(M)
-        d = xn - c
-        rel = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
-        return res, c, M, rel, float(radius)
+        return res, c, M, radial_error(c, M, xn, xp=np), float(radius)
     xpad, wpad = pad_rows(xn)
     res, c, M, rel, radius = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
     return res, np.asarray(c), np.asarray(M), np.asarray(rel)[: len(xn)], float(radius)

@@ -121,10 +121,11 @@ def log_radius_scale(p: Float[Array, " n"], model: str) -> jax.Array:
     return jnp.exp(-jnp.sum(p[:3]) / 3.0)
 
 
-def radial_error(centre: jax.Array, M: jax.Array, x: jax.Array) -> jax.Array:
-    """Relative radial error |M^(1/2) (x - c)| - 1 of each sample (dimensionless)."""
+def radial_error(centre: ArrayLike, M: ArrayLike, x: ArrayLike, xp=jnp) -> ArrayLike:
+    """Relative radial error |M^(1/2) (x - c)| - 1 of each sample (dimensionless). ``xp``: jnp
+    inside the fits, np for host samples of a long log (no device copy)."""
     d = x - centre
-    return jnp.sqrt(jnp.maximum(jnp.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
+    return xp.sqrt(xp.maximum(xp.einsum("ni,ij,nj->n", d, M, d), 0.0)) - 1.0
 
 
 def sqrtm_spd(M: Float[ArrayLike, "3 3"], iterations: int = 12) -> jax.Array:
