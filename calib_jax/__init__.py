@@ -1,8 +1,10 @@
-"""calib_jax: triaxial accelerometer and magnetometer calibration in JAX.
+"""calib_jax: triaxial accelerometer, gyroscope and magnetometer calibration in JAX.
 
 Public API (re-exports only; each concept lives in its own module):
 
 - :func:`calibrate_accel`: raw log -> :class:`AccelCalibration` (paper 1, end to end).
+- :func:`calibrate_gyro`: multi-position log with turns -> :class:`GyroCalibration` (imu_tk's
+  method: integrated rates must carry gravity from pose to pose).
 - :func:`calibrate_mag`: free-rotation log -> :class:`MagCalibration` (paper 2 ellipsoid).
 - :func:`calibrate_marg`, :func:`evaluate_turn`: paper 2's routine and its evaluation.
 - :mod:`calib_jax.align`: sensor-plane alignment, accel-mag rotation.
@@ -39,6 +41,9 @@ _LAZY = {
     "MagCalibration": (".calibration", "MagCalibration"),
     "broad_excerpt_path": (".datasets", "broad_excerpt_path"),
     "demo_log_path": (".datasets", "demo_log_path"),
+    "gyro_demo_log_path": (".datasets", "gyro_demo_log_path"),
+    "calibrate_gyro": (".gyro", "calibrate_gyro"),
+    "GyroCalibration": (".gyro", "GyroCalibration"),
     "load_broad_excerpt": (".datasets", "load_broad_excerpt"),
     "mag_demo_log_path": (".datasets", "mag_demo_log_path"),
     "solve_implicit": (".implicit", "solve_implicit"),
@@ -111,6 +116,9 @@ __all__ = [
     "StaticReport",
     "Status",
     "calibrate_accel",
+    "calibrate_gyro",
+    "GyroCalibration",
+    "gyro_demo_log_path",
     "correct",
     "demo_log_path",
     "detect_static",

@@ -452,6 +452,9 @@ def calibrate_accel(
         warnings=warn,
         notes=notes,
         static_means=means,
+        static_intervals=np.array([[iv.start, iv.stop] for iv in report.intervals], int).reshape(
+            -1, 2
+        ),
         nominal_offset=offset,
         nominal_scale=scale,
         sensor_id=sensor_id,

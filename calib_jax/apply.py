@@ -7,9 +7,10 @@ guessed columns, units of time); a plain text log is streamed ``chunk_rows`` lin
 so memory does not grow with its length. Compressed and MAT files are read whole.
 
 The output CSV holds one row per data row of the log, in order: ``t`` (seconds, as the loader
-reads the time column), the corrected ``ax, ay, az`` and ``mx, my, mz``, and the gyroscope and
-temperature columns unchanged. Rows with a non-finite cell keep it (NaN in, NaN out); rows
-with the wrong number of fields are skipped, as every command skips them, and counted.
+reads the time column), the corrected ``ax, ay, az``, ``gx, gy, gz`` and ``mx, my, mz`` (each
+triad the calibration corrects; the others as read), and the temperature unchanged. Rows
+with a non-finite cell keep it (NaN in, NaN out); rows with the wrong number of fields are
+skipped, as every command skips them, and counted.
 Numbers are written with 12 significant digits (the time with 17), more than any sensor
 resolves. Nothing here imports JAX.
 """
@@ -26,7 +27,7 @@ import numpy as np
 from .export import Correction, corrections
 from .io.files import SensorLog, iter_rows, load_log
 
-_TRIADS = (("acc", "a", "accel"), ("gyro", "g", None), ("mag", "m", "mag"))
+_TRIADS = (("acc", "a", "accel"), ("gyro", "g", "gyro"), ("mag", "m", "mag"))
 
 
 @dataclass
@@ -103,17 +104,19 @@ def apply_calibration(
         Lines per chunk when streaming.
     """
     corr = corrections(cal)
+    # a headerless 3- or 4-column log holds the one sensor a single-sensor calibration corrects
+    hint = {"sensor": next(iter(corr))} if len(corr) == 1 else {}
     if isinstance(log, SensorLog):
         fixed = correct_log(corr, log)
         return fixed if out is None else _write(out, [(_columns(fixed), 0)], log, corr, False)
     if out is None:
-        return correct_log(corr, load_log(log, columns=columns, sample_rate=sample_rate))
+        return correct_log(corr, load_log(log, columns=columns, sample_rate=sample_rate, **hint))
     if Path(out).resolve() == Path(log).resolve():
         raise ValueError(f"--out {out} is the log itself: write the corrected log elsewhere")
-    head = load_log(log, columns=columns, sample_rate=sample_rate, max_rows=chunk_rows)
+    head = load_log(log, columns=columns, sample_rate=sample_rate, max_rows=chunk_rows, **hint)
     use, _ = _plan(corr, head)  # refuse before writing anything
     if head.layout is None and len(head) >= chunk_rows:
-        head = load_log(log, columns=columns, sample_rate=sample_rate)  # compressed: whole
+        head = load_log(log, columns=columns, sample_rate=sample_rate, **hint)  # whole
     if head.layout is None or len(head) < chunk_rows:
         fixed = correct_log(corr, head)
         return _write(out, [(_columns(fixed), 0)], head, corr, False)

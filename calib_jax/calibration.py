@@ -61,8 +61,8 @@ class Record:
         if kind != cls.kind:
             raise ValueError(
                 f"{where}not {cls.what}: kind is {kind!r} (each kind loads with its class: "
-                "AccelCalibration, MagCalibration, MARGRecord, BatchRecord, Diagnosis; "
-                "calib_jax.export.read reads any calibration)"
+                "AccelCalibration, MagCalibration, GyroCalibration, MARGRecord, BatchRecord, "
+                "Diagnosis; calib_jax.export.read reads any calibration)"
             )
 
     def __eq__(self, other) -> bool:
@@ -116,6 +116,10 @@ class AccelCalibration(Record):
     and why (calib_jax.observations)."""
     static_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     """Raw means of the static intervals (n_intervals, 3), input units."""
+    static_intervals: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), int))
+    """Where the static intervals lie in the log, [start, stop) sample indices
+    (n_intervals, 2); empty for a fit of given points. The gyroscope fit integrates between
+    them (calib_jax.gyro)."""
     nominal_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     nominal_scale: float = 1.0
     """The 'before' conversion (raw - nominal_offset) / nominal_scale, see calib_jax.accel."""
@@ -293,6 +297,7 @@ class AccelCalibration(Record):
             "warnings": list(self.warnings),
             "notes": list(self.notes),
             "static_means": np.asarray(self.static_means).tolist(),
+            "static_intervals": np.asarray(self.static_intervals, int).tolist(),
             "nominal": {
                 "offset": np.asarray(self.nominal_offset).tolist(),
                 "scale": self.nominal_scale,
@@ -355,6 +360,7 @@ class AccelCalibration(Record):
             warnings=r.strings("warnings"),
             notes=r.strings("notes"),
             static_means=r.arr("static_means", (-1, 3), default=[], finite=False),
+            static_intervals=r.arr("static_intervals", (-1, 2), default=[]).astype(int),
             nominal_offset=r.arr("nominal.offset", (3,), default=[0.0, 0.0, 0.0]),
             nominal_scale=r.num("nominal.scale", default=1.0, positive=True),
             sensor_id=r.text("sensor_id", optional=True),

@@ -1,4 +1,4 @@
-"""Command line: ``calib-jax accel|mag|marg|diagnose FILE``, ``calib-jax batch DIR``,
+"""Command line: ``calib-jax accel|mag|gyro|marg|diagnose FILE``, ``calib-jax batch DIR``,
 ``calib-jax record``, ``calib-jax apply CAL LOG``, ``calib-jax export CAL`` and
 ``calib-jax demo``.
 
@@ -433,6 +433,60 @@ def run_marg(args: argparse.Namespace) -> int:
     return 0 if rec.success else 1
 
 
+def run_gyro(args: argparse.Namespace) -> int:
+    _enable_x64()
+    from .gyro import calibrate_gyro
+
+    if args.gyro_file is None:
+        log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate)
+        if log.gyro is None:
+            raise ValueError(
+                f"{args.file}: the log has no gyro columns (gx, gy, gz): map them with "
+                "--columns, or give the gyro's own file after the accelerometer's "
+                "(calib-jax gyro ACC_FILE GYRO_FILE)"
+            )
+    else:
+        log = load_input(
+            args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="accel"
+        )
+        glog = load_input(args.gyro_file, sample_rate=args.sample_rate, sensor="gyro")
+        _same_clock(args, log, glog)
+        log.gyro = glog.vectors("gyro")
+    cal = calibrate_gyro(
+        log,
+        units=args.gyro_units,
+        solver=args.solver,
+        sensor_id=args.sensor_id,
+        accel_options={
+            "g": args.g,
+            "units": args.units,
+            **_accel_detector(args, log.sample_rate),
+        },
+    )
+    print(f"calib-jax gyro: {args.file}" + (f" + {args.gyro_file}" if args.gyro_file else ""))
+    print(cal.report())
+    _json_out(cal, args.json)
+    return 0 if cal.success else 1
+
+
+def _same_clock(args: argparse.Namespace, log, glog) -> None:
+    """Two files of one recording: the same number of rows and, where both have one, the same
+    time column."""
+    import numpy as np
+
+    if len(log) != len(glog):
+        raise ValueError(
+            f"{args.file} has {len(log)} rows and {args.gyro_file} {len(glog)}: the gyro fit "
+            "needs both sensors sample by sample on one clock"
+        )
+    if log.t is not None and glog.t is not None and not np.allclose(log.t, glog.t):
+        worst = float(np.max(np.abs(log.t - glog.t)))
+        raise ValueError(
+            f"the time columns of {args.file} and {args.gyro_file} differ by up to {worst:.3g} "
+            "s: the gyro fit needs both sensors sample by sample on one clock"
+        )
+
+
 def run_apply(args: argparse.Namespace) -> int:
     from .apply import apply_calibration
     from .export import read
@@ -574,6 +628,36 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", default=None, help="write the MARG record (kind 'marg') here")
     g.add_argument("--plot", default=None, help="write the magnetometer figure (PNG) here")
     g.set_defaults(func=run_marg, output_files=_FILE_OUTPUTS)
+
+    gy = sub.add_parser(
+        "gyro",
+        help="gyroscope scale, misalignment and bias from a multi-position log (imu_tk method)",
+        description="The imu_tk method (Tedaldi et al. 2014): the accelerometer is calibrated "
+        "on the log's static poses, the gyro bias is its mean at rest, and the nine entries of "
+        "C in w = C (raw - b) are fitted so that the rates integrated between consecutive "
+        "poses turn one pose's gravity direction onto the next's. Needs accelerometer and gyro "
+        "columns on one clock (one file, or the accelerometer's file then the gyro's) and the "
+        "time (a time column or --sample-rate). Reports the rotation error between poses, in "
+        "degrees, before and after, beside what the gyro's rest noise alone would leave.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    gy.add_argument("file", help="log with accelerometer and gyro columns (or accelerometer only)")
+    gy.add_argument("gyro_file", nargs="?", default=None, help="the gyro's file, same rows")
+    gy.add_argument(
+        "--gyro-units",
+        default="auto",
+        choices=["auto", "counts", "rad/s", "deg/s"],
+        help="of the gyro readings (checked against the fitted scale; default recognised)",
+    )
+    gy.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference")
+    gy.add_argument("--units", default="auto", help="accelerometer units: auto, counts, g, m/s^2")
+    gy.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3"])
+    gy.add_argument("--columns", default=None, help="e.g. t,ax,ay,az,gx,gy,gz")
+    gy.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
+    _add_detector_options(gy)
+    gy.add_argument("--sensor-id", default=None)
+    gy.add_argument("--json", default=None, help="write the gyro calibration (kind 'gyro') here")
+    gy.set_defaults(func=run_gyro, output_files=(("json", "--json"),))
 
     b = sub.add_parser(
         "batch", help="calibrate every log under a directory, in chunks (or on a Dask cluster)"

@@ -15,6 +15,12 @@ def demo_log_path() -> Path:
     return Path(str(resources.files("calib_jax") / "data" / "imutk_xsens" / "xsens_acc.mat"))
 
 
+def gyro_demo_log_path() -> Path:
+    """The gyro log recorded with :func:`demo_log_path`'s accelerometer (same rows and times;
+    raw counts, columns t, gx, gy, gz). ``calib-jax gyro`` takes the two files together."""
+    return Path(str(resources.files("calib_jax") / "data" / "imutk_xsens" / "xsens_gyro.mat"))
+
+
 def mag_demo_log_path() -> Path:
     """CK-Explorer accelerometer + magnetometer tumble (12,000 samples, acc in g and already
     calibrated, magnetometer raw with a large hard iron; Apache-2.0). See

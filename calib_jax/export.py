@@ -50,7 +50,7 @@ class Correction:
     """x = matrix @ (raw - bias) for one sensor triad."""
 
     sensor: str
-    """'accel' or 'mag'."""
+    """'accel', 'gyro' or 'mag'."""
     matrix: np.ndarray
     """C (3 x 3)."""
     bias: np.ndarray
@@ -178,6 +178,21 @@ def _from_dict(d: dict, where) -> dict[str, Correction]:
             source=d.get("source"),
         )
         return out
+    if kind == "gyro":
+        from .gyro import GyroCalibration
+
+        g = GyroCalibration.from_dict(d, source=where)
+        return {
+            "gyro": Correction(
+                sensor="gyro",
+                matrix=np.array(g.matrix, float),
+                bias=np.array(g.bias, float),
+                input_units=g.input_units,
+                output_units=g.output_units,
+                status=g.status,
+                source=g.source,
+            )
+        }
     if kind == "ellipsoid":
         cal = MagCalibration.from_dict(d, source=where)
         return {cal.sensor: _ellipsoid(cal)}

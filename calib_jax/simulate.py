@@ -629,3 +629,91 @@ def simulate_session(
             "rate": rate,
         },
     }
+
+
+@dataclass(frozen=True)
+class SimulatedIMU:
+    """A simulated accelerometer + gyroscope pose-and-turn log with its truth (the imu_tk
+    protocol): still poses joined by smooth turns about random body axes."""
+
+    t: np.ndarray
+    acc: np.ndarray
+    """Raw accelerometer, a' = alpha f + beta + noise, f the specific force in g (N, 3)."""
+    gyro: np.ndarray
+    """Raw gyro, C^-1 w + b + noise, w the body rate in rad/s (N, 3)."""
+    rate_true: np.ndarray
+    """w, rad/s (N, 3)."""
+    accel_params: np.ndarray
+    gyro_matrix: np.ndarray
+    """C, rad/s per raw unit: w = C (raw - b)."""
+    gyro_bias: np.ndarray
+    pose: np.ndarray
+    """Index of the still pose of each sample, -1 while turning (N,)."""
+    sample_rate: float
+
+
+def random_gyro_matrix(
+    rng: np.random.Generator | int = 0,
+    scale: float = 1.0,
+    scale_spread: float = 0.05,
+    misalignment: float = 0.02,
+) -> np.ndarray:
+    """A plausible C: ``scale`` (rad/s per unit) times (1 +- scale_spread) per axis, with
+    off-diagonal misalignment terms up to +-``misalignment``."""
+    rng = np.random.default_rng(rng)
+    C = np.eye(3) + rng.uniform(-misalignment, misalignment, (3, 3)) * (1 - np.eye(3))
+    return C * (1.0 + rng.uniform(-scale_spread, scale_spread, 3))[None, :] * scale
+
+
+def simulate_gyro_log(
+    rng: np.random.Generator | int = 0,
+    *,
+    n_poses: int = 24,
+    gyro_matrix: np.ndarray | None = None,
+    gyro_bias: np.ndarray | None = None,
+    accel_params: np.ndarray | None = None,
+    sample_rate: float = 100.0,
+    hold_s: float = 2.0,
+    turn_s: float = 1.5,
+    gyro_noise: float = 0.003,
+    accel_noise: float = 0.002,
+    axes: np.ndarray | None = None,
+) -> SimulatedIMU:
+    """Still poses of ``hold_s`` joined by turns of ``turn_s``: each turn is about a body axis
+    (uniform on the sphere, or drawn from the rows of ``axes``) by 45-135 deg, with a smooth
+    rate profile (zero at both ends). The attitude is composed exactly (SciPy), independently
+    of calib_jax's integrator. Noise: per-sample standard deviations in rad/s and in g.
+    """
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(rng)
+    C = random_gyro_matrix(rng) if gyro_matrix is None else np.asarray(gyro_matrix, float)
+    b = rng.uniform(-0.05, 0.05, 3) if gyro_bias is None else np.asarray(gyro_bias, float)
+    p = random_params(rng) if accel_params is None else np.asarray(accel_params, float)
+    hold, turn = int(round(hold_s * sample_rate)), int(round(turn_s * sample_rate))
+    att = Rotation.random(random_state=rng)  # body -> nav
+    f, w, pose = [], [], []
+    for i in range(n_poses):
+        n_hold = hold * (3 if i == 0 else 1)
+        f.append(np.repeat(att.inv().apply([0.0, 0.0, 1.0])[None], n_hold, axis=0))
+        w.append(np.zeros((n_hold, 3)))
+        pose.append(np.full(n_hold, i))
+        if i + 1 == n_poses:
+            break
+        axis = random_directions(1, rng)[0] if axes is None else axes[rng.integers(len(axes))]
+        axis = axis / np.linalg.norm(axis)
+        angle = np.deg2rad(rng.uniform(45.0, 135.0)) * rng.choice([-1.0, 1.0])
+        u = np.arange(turn) / turn
+        theta = angle * (u - np.sin(2 * np.pi * u) / (2 * np.pi))
+        rate = angle / (turn / sample_rate) * (1 - np.cos(2 * np.pi * u))
+        turned = att * Rotation.from_rotvec(theta[:, None] * axis[None, :])
+        f.append(turned.inv().apply([0.0, 0.0, 1.0]))
+        w.append(rate[:, None] * axis[None, :])
+        pose.append(np.full(turn, -1))
+        att = att * Rotation.from_rotvec(angle * axis)
+    f, w, pose = np.concatenate(f), np.concatenate(w), np.concatenate(pose)
+    alpha, beta = alpha_beta(p)
+    acc = f @ alpha.T + beta + rng.normal(0.0, accel_noise, f.shape)
+    gyro = w @ np.linalg.inv(C).T + b + rng.normal(0.0, gyro_noise, w.shape) @ np.linalg.inv(C).T
+    t = np.arange(len(f)) / sample_rate
+    return SimulatedIMU(t, acc, gyro, w, p, C, b, pose, sample_rate)

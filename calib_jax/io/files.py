@@ -120,11 +120,11 @@ class SensorLog:
         return 0
 
     def vectors(self, sensor: str) -> np.ndarray:
-        """The (N, 3) float readings of ``sensor`` ("accel" or "mag"); a ValueError naming
-        the file and the columns to map when the log has none."""
-        x = {"accel": self.acc, "mag": self.mag}[sensor]
+        """The (N, 3) float readings of ``sensor`` ("accel", "gyro" or "mag"); a ValueError
+        naming the file and the columns to map when the log has none."""
+        x = {"accel": self.acc, "gyro": self.gyro, "mag": self.mag}[sensor]
         if x is None:
-            cols = "ax, ay, az" if sensor == "accel" else "mx, my, mz"
+            cols = {"accel": "ax, ay, az", "gyro": "gx, gy, gz", "mag": "mx, my, mz"}[sensor]
             raise ValueError(
                 f"{self.path}: the log has no {sensor} columns ({cols}); map them with --columns"
             )

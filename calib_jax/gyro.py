@@ -1,0 +1,676 @@
+"""Gyroscope calibration from a multi-position log (imu_tk's method, Tedaldi et al. 2014).
+
+The log is the accelerometer's: static poses with rotations between them, recorded with the
+gyroscope on the same clock. The accelerometer is calibrated first (:func:`calibrate_accel`,
+the same front door and static detector); its static intervals give
+
+* the gyro bias: the mean gyro reading at rest (Earth's rate, 7e-5 rad/s, is left in it);
+* the rest noise, from which the error floor of the fit is predicted;
+* the gravity direction of every pose, from the calibrated accelerometer.
+
+Between consecutive poses the calibrated rates C (raw - b), integrated
+(:func:`calib_jax.rotations.integrate_rates`), must turn the first pose's gravity direction
+onto the second's; Levenberg-Marquardt fits the nine entries of C to that residual
+(:func:`calib_jax.models.gyro.gravity_residual`), from a start found by a scan over one common
+scale, so raw counts, deg/s and rad/s need no unit or initial guess.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .calibration import (
+    FORMAT_VERSION,
+    AccelCalibration,
+    Record,
+    _check_version,
+    _Doc,
+    _fields_equal,
+    _raw_vectors,
+    _sanitize,
+    linear_forms,
+)
+from .io.files import SensorLog
+from .lm import fit_status, lm_solve, status_message
+from .models.gyro import Motions, gravity_residual, to_imu_tk
+from .padding import bucket
+from .runtime import disk_jit
+
+UNIT_SCALES = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
+"""rad/s per unit of the readings a gyroscope may log (counts have no nominal scale)."""
+MAX_MOTION_S = 60.0
+"""Motions longer than this are left out: a missed pose, not a rotation to integrate."""
+MIN_MOTIONS = 4
+_SCAN = np.concatenate([np.logspace(-7.0, 2.0, 97), -np.logspace(-7.0, 2.0, 97)])
+"""The start's first scan: common scales of 1e-7 to 100 rad/s per unit, either sign."""
+
+
+@dataclass(frozen=True, eq=False)
+class GyroCalibration(Record):
+    """Outcome of :func:`calibrate_gyro`: w = C (raw - b) in rad/s.
+
+    Errors are the angles (degrees, RMS over the motions) by which the integrated rotation
+    misses the next pose's gravity direction: ``rms_raw_deg`` with the readings as logged (a
+    nominal unit scale and no bias; NaN for counts), ``rms_before_deg`` with the nominal scale
+    (for counts: the best single scale) and the rest bias removed, ``rms_after_deg``
+    calibrated; ``noise_floor_deg`` is what the gyro's rest noise alone would leave.
+    """
+
+    kind: ClassVar[str] = "gyro"
+    what: ClassVar[str] = "a gyroscope calibration"
+    matrix: np.ndarray
+    """C (3 x 3): scale and misalignment, rad/s per input unit."""
+    bias: np.ndarray
+    """b (3,), input units: the mean reading at rest."""
+    stderr_matrix: np.ndarray
+    stderr_bias: np.ndarray
+    covariance: np.ndarray
+    """Of C's entries row by row (9 x 9)."""
+    condition: float
+    status: str
+    input_units: str
+    solver: str
+    solver_status: int
+    solver_message: str
+    iterations: int
+    nfev: int
+    n_poses: int
+    n_motions: int
+    rms_raw_deg: float
+    rms_before_deg: float
+    rms_after_deg: float
+    noise_floor_deg: float
+    motion_errors_deg: np.ndarray
+    """Per motion used, calibrated (n_motions,)."""
+    rest_noise: np.ndarray
+    """Per-axis standard deviation of one calibrated sample at rest, rad/s (3,)."""
+    bias_spread: np.ndarray
+    """Standard deviation of the per-pose rest means about the bias, rad/s (3,): drift."""
+    sample_rate: float
+    output_units: str = "rad/s"
+    poorly_determined: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    sensor_id: str | None = None
+    date: str = field(
+        default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    )
+    source: str | None = None
+    format_version: int = FORMAT_VERSION
+
+    @property
+    def success(self) -> bool:
+        from .status import is_usable
+
+        return is_usable(self.status)
+
+    def apply(self, raw) -> np.ndarray:
+        """Calibrated rates C (raw - b), rad/s, for one reading (3,), many (N, 3) or a loaded
+        log's gyro columns; inside JAX use :func:`calib_jax.models.gyro.correct`."""
+        return (_raw_vectors(raw, "gyro") - self.bias) @ self.matrix.T
+
+    def imu_tk(self) -> tuple[np.ndarray, np.ndarray]:
+        """imu_tk's (T, K): misalignment with unit diagonal and diagonal scale, C = T K."""
+        return to_imu_tk(self.matrix)
+
+    def __eq__(self, other) -> bool:
+        return _fields_equal(self, other)
+
+    def __repr__(self) -> str:
+        return (
+            f"GyroCalibration(status={self.status!r}, {self.n_motions} motions, rotation error "
+            f"{self.rms_before_deg:.3g} -> {self.rms_after_deg:.3g} deg)"
+        )
+
+    def report(self) -> str:
+        """What the CLI prints: C with its standard errors, b, the errors and the status."""
+        T, K = self.imu_tk()
+        out = [f"C (rad/s per {self.input_units}), w = C (raw - b), +- standard error:"]
+        for i in range(3):
+            out.append(
+                "  "
+                + "  ".join(
+                    f"{self.matrix[i, j]:>12.6g} +-{self.stderr_matrix[i, j]:<9.2g}"
+                    for j in range(3)
+                )
+            )
+        pairs = zip(self.bias, self.stderr_bias, strict=True)
+        out.append(
+            f"bias b ({self.input_units}): " + ", ".join(f"{b:.6g} +- {s:.2g}" for b, s in pairs)
+        )
+        out.append(
+            "imu_tk form: scale K = "
+            + ", ".join(f"{k:.6g}" for k in np.diag(K))
+            + "; misalignment T off-diagonal = "
+            + ", ".join(f"{T[i, j]:+.4f}" for i in range(3) for j in range(3) if i != j)
+        )
+        raw = "" if np.isnan(self.rms_raw_deg) else f"as read {self.rms_raw_deg:.3g}, "
+        out.append(
+            f"rotation error between poses (RMS over {self.n_motions} motions, degrees): {raw}"
+            f"nominal scale and rest bias {self.rms_before_deg:.3g}, calibrated "
+            f"{self.rms_after_deg:.3g} (the rest noise alone: {self.noise_floor_deg:.3g})"
+        )
+        out.append(
+            "rest noise per sample (rad/s): "
+            + ", ".join(f"{s:.3g}" for s in self.rest_noise)
+            + "; pose-to-pose bias spread (rad/s): "
+            + ", ".join(f"{s:.3g}" for s in self.bias_spread)
+        )
+        out.append(
+            f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations); "
+            f"condition number {self.condition:.3g}; status: {self.status}"
+        )
+        if self.poorly_determined:
+            out.append("poorly determined: " + ", ".join(self.poorly_determined))
+        out += [f"note: {n}" for n in self.notes]
+        out += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(out)
+
+    def to_dict(self) -> dict:
+        T, K = self.imu_tk()
+        return _sanitize(
+            {
+                "format_version": self.format_version,
+                "kind": self.kind,
+                "sensor_id": self.sensor_id,
+                "date": self.date,
+                "source": self.source,
+                "units": {"input": self.input_units, "output": self.output_units},
+                **linear_forms(correction=self.matrix, offset=self.bias),
+                "imu_tk": {"misalignment": T.tolist(), "scale": np.diag(K).tolist()},
+                "stderr": {
+                    "correction": np.asarray(self.stderr_matrix).tolist(),
+                    "offset": np.asarray(self.stderr_bias).tolist(),
+                },
+                "covariance": np.asarray(self.covariance).tolist(),
+                "condition": self.condition,
+                "status": self.status,
+                "solver": self.solver,
+                "solver_status": self.solver_status,
+                "solver_message": self.solver_message,
+                "iterations": self.iterations,
+                "nfev": self.nfev,
+                "n_poses": self.n_poses,
+                "n_motions": self.n_motions,
+                "sample_rate": self.sample_rate,
+                "rms_raw_deg": self.rms_raw_deg,
+                "rms_before_deg": self.rms_before_deg,
+                "rms_after_deg": self.rms_after_deg,
+                "noise_floor_deg": self.noise_floor_deg,
+                "motion_errors_deg": np.asarray(self.motion_errors_deg).tolist(),
+                "rest_noise": np.asarray(self.rest_noise).tolist(),
+                "bias_spread": np.asarray(self.bias_spread).tolist(),
+                "poorly_determined": list(self.poorly_determined),
+                "warnings": list(self.warnings),
+                "notes": list(self.notes),
+            }
+        )
+
+    @classmethod
+    def from_dict(cls, d: object, source: str | Path | None = None) -> GyroCalibration:
+        """Rebuild from :meth:`to_dict`'s layout; C must be finite and invertible."""
+        r = _Doc(d, source)
+        _check_version(r.d, r.where)
+        cls._check_kind(r.d, r.where, legacy=False)
+        C = r.arr("correction.matrix", (3, 3))
+        if not np.linalg.cond(C) < 1e12:
+            raise ValueError(
+                f"{r.where}key 'correction.matrix' is singular (condition number "
+                f"{np.linalg.cond(C):.3g}); refit the calibration"
+            )
+        return cls(
+            matrix=C,
+            bias=r.arr("correction.offset", (3,)),
+            stderr_matrix=r.arr("stderr.correction", (3, 3), finite=False),
+            stderr_bias=r.arr("stderr.offset", (3,), finite=False),
+            covariance=r.arr("covariance", (9, 9), finite=False),
+            condition=r.num("condition", finite=False),
+            status=r.text("status"),
+            input_units=r.text("units.input"),
+            output_units=r.text("units.output"),
+            solver=r.text("solver"),
+            solver_status=r.integer("solver_status"),
+            solver_message=r.text("solver_message"),
+            iterations=r.integer("iterations"),
+            nfev=r.integer("nfev"),
+            n_poses=r.integer("n_poses"),
+            n_motions=r.integer("n_motions"),
+            sample_rate=r.num("sample_rate", positive=True),
+            rms_raw_deg=r.num("rms_raw_deg", finite=False),
+            rms_before_deg=r.num("rms_before_deg", finite=False),
+            rms_after_deg=r.num("rms_after_deg", finite=False),
+            noise_floor_deg=r.num("noise_floor_deg", finite=False),
+            motion_errors_deg=r.arr("motion_errors_deg", (-1,), finite=False),
+            rest_noise=r.arr("rest_noise", (3,), finite=False),
+            bias_spread=r.arr("bias_spread", (3,), finite=False),
+            poorly_determined=r.strings("poorly_determined"),
+            warnings=r.strings("warnings"),
+            notes=r.strings("notes"),
+            sensor_id=r.text("sensor_id", optional=True),
+            date=r.text("date"),
+            source=r.text("source", optional=True),
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled parts: one program per padded shape
+
+
+def _angles(c9, motions: Motions) -> jax.Array:
+    """Per-motion miss angle, radians: 2 asin(|r| / 2) of the gravity residual r."""
+    r = gravity_residual(c9, motions).reshape(-1, 3)
+    return 2.0 * jnp.arcsin(jnp.clip(jnp.linalg.norm(r, axis=1) / 2.0, 0.0, 1.0))
+
+
+def _scan_costs(scales, motions: Motions, weights) -> jax.Array:
+    """Sum of weighted squared miss angles for C = s I, for each s in ``scales``."""
+    eye = jnp.eye(3, dtype=motions.rates.dtype).ravel()
+    return jax.vmap(lambda s: jnp.sum(weights * _angles(s * eye, motions) ** 2))(scales)
+
+
+def _fit(c0, motions: Motions, weights, update_type: int):
+    # a miss between unit vectors has no component along gravity to first order: each
+    # motion gives two independent residuals, not three
+    return lm_solve(
+        gravity_residual,
+        c0,
+        motions,
+        weights=jnp.repeat(weights, 3),
+        update_type=update_type,
+        dof=2.0 * jnp.sum(weights) - c0.shape[0],
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled(name: str, update_type: int = 1):
+    if name == "fit":
+        return disk_jit(functools.partial(_fit, update_type=update_type), f"gyro.fit {update_type}")
+    fun = {"angles": _angles, "scan": _scan_costs}[name]
+    return disk_jit(fun, f"gyro.{name}")
+
+
+# ---------------------------------------------------------------------------------------------
+# host side
+
+
+def _time_steps(t, sample_rate, n: int) -> tuple[np.ndarray, float]:
+    """(dt (N,), the time from each sample to the next; the sample rate) from the time column
+    or the sample rate; a ValueError saying what to give when neither is there."""
+    if t is not None:
+        t = np.asarray(t, float)
+        dt = np.diff(t)
+        if len(t) != n or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
+            bad = int(np.sum(~(dt > 0)))
+            raise ValueError(
+                f"the time column must increase from sample to sample: {bad} steps do not; "
+                "gyro integration needs the time between samples (fix the column, or leave it "
+                "out and give the sample rate, --sample-rate)"
+            )
+        return np.append(dt, 0.0), float(1.0 / np.median(dt))
+    if sample_rate is None:
+        raise ValueError(
+            "the gyro fit integrates the rates over time, and the log has neither a time "
+            "column nor a sample rate: give sample_rate= (--sample-rate HZ)"
+        )
+    return np.full(n, 1.0 / sample_rate), float(sample_rate)
+
+
+def _saturated(g: np.ndarray, bias: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """(N,) True where an axis sits at its log-wide extreme, far from rest, in 3 or more
+    samples: the reading clipped at the gyro's range."""
+    bad = np.zeros(len(g), bool)
+    for ax in range(3):
+        col = g[:, ax]
+        for ext in (col.max(), col.min()):
+            hit = col == ext
+            if hit.sum() >= 3 and abs(ext - bias[ax]) > 50 * max(noise[ax], 1e-12):
+                bad |= hit
+    return bad
+
+
+def _gyro_still(g: np.ndarray, intervals: np.ndarray) -> np.ndarray:
+    """The accelerometer's static intervals narrowed to where the gyro is still too.
+
+    A turn that starts slowly about an axis near gravity barely moves the gravity direction,
+    so the accelerometer's intervals can reach into it; the gyro sees it. Within each
+    interval the longest run of samples within 3 median deviations of the interval's median
+    rate is kept (3 x the median of a three-axis noise norm is 2 standard deviations past its
+    99.9th percentile)."""
+    out = []
+    for s, e in intervals:
+        dev = np.linalg.norm(g[s:e] - np.median(g[s:e], axis=0), axis=1)
+        quiet = np.concatenate([[False], dev <= 3.0 * np.median(dev), [False]])
+        edges = np.flatnonzero(np.diff(quiet.astype(int)))
+        starts, stops = edges[0::2], edges[1::2]
+        j = int(np.argmax(stops - starts))
+        out.append((s + starts[j], s + stops[j]))
+    return np.array(out, int).reshape(-1, 2)
+
+
+def _motion_windows(intervals: np.ndarray) -> list[tuple[int, int, int]]:
+    """(pose i, first, stop) sample ranges from the last static sample of pose i to the first
+    of pose i + 1."""
+    iv = np.asarray(intervals).tolist()
+    return [(i, iv[i][1] - 1, iv[i + 1][0] + 1) for i in range(len(iv) - 1)]
+
+
+def _pad_motions(windows, g, dt, bias, dirs, scale) -> tuple[Motions, np.ndarray]:
+    """Motions padded to powers of two in count and length (zero rates and steps, weight 0)."""
+    k = bucket(len(windows)) if len(windows) > 8 else 8
+    length = bucket(max(e - s for _, s, e in windows))
+    rates = np.zeros((k, length, 3))
+    steps = np.zeros((k, length))
+    before = np.tile([0.0, 0.0, 1.0], (k, 1))
+    after = before.copy()
+    for j, (i, s, e) in enumerate(windows):
+        rates[j, : e - s] = (g[s:e] - bias) * scale
+        steps[j, : e - s - 1] = dt[s : e - 1]
+        before[j], after[j] = dirs[i], dirs[i + 1]
+    w = np.zeros(k)
+    w[: len(windows)] = 1.0
+    return Motions(*(jnp.asarray(a) for a in (rates, steps, before, after))), w
+
+
+def _check_turn_axes(g: np.ndarray) -> None:
+    """A ValueError naming the axes no turn in the log went about (their columns of C cannot
+    be fitted). The turns are the samples more than 5 noise levels from the median reading
+    (the log is mostly at rest); their second moment sum (g - med)(g - med)' has an
+    eigenvalue near zero, below 1e-3 of the largest, for each raw axis nothing turned about."""
+    dev = g - np.median(g, axis=0)
+    size = np.linalg.norm(dev, axis=1)
+    moving = size > 5.0 * 1.4826 * np.median(size) + 1e-300
+    if moving.sum() < 10:
+        return  # nothing turned at all: the motion count says so
+    evals, evecs = np.linalg.eigh(dev[moving].T @ dev[moving])
+    weak = [i for i in range(3) if evals[i] < 1e-3 * evals[-1]]
+    if not weak:
+        return
+    v = evecs[:, weak[-1]]
+    raise ValueError(
+        f"the turns in this log go about {'one axis' if len(weak) == 2 else 'two axes'} only "
+        f"(mostly the sensor's {_axis_name(evecs[:, -1])}): nothing turned about "
+        f"{_axis_name(v)}, so the scale and misalignment of gyro axis "
+        f"{'xyz'[int(np.argmax(np.abs(v)))]} cannot be determined; between poses turn the "
+        "sensor about all three of its axes"
+    )
+
+
+def _axis_name(v: np.ndarray) -> str:
+    v = v / np.linalg.norm(v)
+    i = int(np.argmax(np.abs(v)))
+    if abs(v[i]) > 0.95:
+        return f"{'xyz'[i]} axis"
+    return "axis [" + ", ".join(f"{c:+.2f}" for c in v) + "]"
+
+
+def _start_scale(motions: Motions, w: np.ndarray) -> float:
+    """The common scale s (rad/s per unit) with the smallest miss for C = s I: a log scan of
+    1e-7 to 100 either sign, then a fine one around the best."""
+    scan = _compiled("scan")
+    cost = np.asarray(scan(jnp.asarray(_SCAN), motions, jnp.asarray(w)))
+    s0 = _SCAN[int(np.nanargmin(cost))]
+    fine = s0 * np.exp(np.linspace(-0.25, 0.25, len(_SCAN)))
+    cost = np.asarray(scan(jnp.asarray(fine), motions, jnp.asarray(w)))
+    return float(fine[int(np.nanargmin(cost))])
+
+
+def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
+    """The input unit: declared (checked against the fitted scale) or recognised from it."""
+    if units in UNIT_SCALES:
+        ratio = scale / UNIT_SCALES[units]
+        if not 0.5 < ratio < 2.0:
+            found = [u for u, f in UNIT_SCALES.items() if 0.7 < scale / f < 1.4]
+            say = f"they are {found[0]}" if found else "they look like raw counts"
+            raise ValueError(
+                f"units={units!r}, but the rotations between poses need {scale:.4g} rad/s per "
+                f"unit of the readings ({ratio:.3g} x the {units} scale): {say}; give "
+                f"units={found[0] if found else 'counts'!r} (--gyro-units) or 'auto'"
+            )
+        return units, []
+    if units not in ("auto", "counts"):
+        raise ValueError(f"units must be auto, counts, rad/s or deg/s, got {units!r}")
+    for u, f in UNIT_SCALES.items():
+        if units == "auto" and 0.8 < scale / f < 1.25:
+            return u, [f"gyro units: {u} (the fitted scale is {scale / f:.3f} x the {u} scale)"]
+    return "counts", [f"gyro units: raw counts, {1 / scale:.5g} counts per rad/s"]
+
+
+def _poorly_determined(stderr: np.ndarray, C: np.ndarray) -> list[str]:
+    out = []
+    for i in range(3):
+        for j in range(3):
+            se, ref = stderr[i, j], abs(C[i, i])
+            if not np.isfinite(se) or se > 0.05 * ref:
+                out.append(f"C[{i},{j}]")
+    return out
+
+
+def calibrate_gyro(
+    data: SensorLog | np.ndarray,
+    gyro: np.ndarray | None = None,
+    *,
+    t: np.ndarray | None = None,
+    sample_rate: float | None = None,
+    accel: AccelCalibration | None = None,
+    units: str = "auto",
+    solver: str = "lm1",
+    sensor_id: str | None = None,
+    accel_options: dict | None = None,
+) -> GyroCalibration:
+    """Calibrate a gyroscope from a multi-position log with rotations between the poses.
+
+    Parameters
+    ----------
+    data : SensorLog or (N, 3) array
+        A log with accelerometer and gyro columns (and a time column or ``sample_rate``), or
+        the accelerometer readings with ``gyro`` the gyro's on the same clock.
+    gyro : (N, 3) array, optional
+        The gyro readings when ``data`` is an array.
+    t : (N,) array, optional
+        Sample times in seconds (arrays only; a log brings its own).
+    sample_rate : float, optional
+        Hz, when there is no time column.
+    accel : AccelCalibration, optional
+        A calibration of this log's accelerometer from :func:`calibrate_accel` (its static
+        intervals are used); default: fitted here.
+    accel_options : dict, optional
+        :func:`calibrate_accel`'s keywords for that fit (``g``, ``units``, detector settings).
+    units : {"auto", "counts", "rad/s", "deg/s"}
+        Of the gyro readings. The fit needs none (its start scans the scale); a declared unit
+        that contradicts the fitted scale is an error, and "auto" names rad/s or deg/s when
+        the scale is within 25 % of theirs.
+    solver : {"lm1", "lm2", "lm3"}
+        Gavin LM update type.
+
+    Raises
+    ------
+    ValueError
+        With what to change: no gyro columns, different lengths, no time, fewer than
+        ``MIN_MOTIONS`` usable motions, rotations about fewer than three axes, contradictory
+        units, or an accelerometer calibration that is not usable.
+    """
+    from .accel import calibrate_accel
+
+    notes: list[str] = []
+    source = None
+    if isinstance(data, SensorLog):
+        acc, g = data.vectors("accel"), data.vectors("gyro")
+        t, sample_rate = data.t, sample_rate or data.sample_rate
+        notes += list(data.notes)
+        source = data.path
+    else:
+        if gyro is None:
+            raise ValueError("give the gyro readings: calibrate_gyro(acc, gyro, ...)")
+        acc, g = np.asarray(data, float), np.asarray(gyro, float)
+    if g.ndim != 2 or g.shape[1] != 3:
+        raise ValueError(f"gyro data must be (samples, 3), got shape {g.shape}")
+    if len(acc) != len(g):
+        raise ValueError(
+            f"the accelerometer has {len(acc)} samples and the gyro {len(g)}: they must share "
+            "one clock, sample for sample (resample one onto the other's times first)"
+        )
+    if not np.all(np.isfinite(g)):
+        raise ValueError(
+            f"{int(np.sum(~np.isfinite(g).all(axis=1)))} gyro rows hold NaN or inf: the rates "
+            "are integrated sample by sample, so fill or cut those rows first"
+        )
+    if solver not in ("lm1", "lm2", "lm3"):
+        raise ValueError(f"solver must be lm1, lm2 or lm3, got {solver!r}")
+    dt, rate = _time_steps(t, sample_rate, len(g))
+    _check_turn_axes(g)
+    if accel is None:
+        accel = calibrate_accel(acc, sample_rate=rate, **(accel_options or {}))
+        notes.append(
+            f"accelerometer calibrated first: {accel.n_intervals} static poses, status "
+            f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
+        )
+    if not accel.success:
+        raise ValueError(
+            f"the accelerometer calibration is {accel.status} ({accel.solver_message}): the "
+            "gravity directions the gyro is fitted to would be wrong; fix the accelerometer "
+            "fit first (calib-jax accel)"
+        )
+    iv = np.asarray(accel.static_intervals, int).reshape(-1, 2)
+    if len(iv) == 0 or iv[-1, 1] > len(g):
+        raise ValueError(
+            "the accelerometer calibration holds no static intervals of this log (it was "
+            "fitted to other data, or loaded from a file written before they were kept): "
+            "leave accel= out to fit it here"
+        )
+
+    # rests: bias, noise and drift
+    iv = _gyro_still(g, iv)
+    rest = np.concatenate([g[s:e] for s, e in iv])
+    bias = rest.mean(axis=0)
+    pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
+    noise_raw = np.sqrt(
+        sum(((g[s:e] - g[s:e].mean(0)) ** 2).sum(0) for s, e in iv) / max(len(rest) - len(iv), 1)
+    )
+    dirs = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv]))
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+
+    # motions between consecutive poses
+    warn: list[str] = []
+    windows = _motion_windows(iv)
+    too_long = [(i, s, e) for i, s, e in windows if (e - s) / rate > MAX_MOTION_S]
+    if too_long:
+        notes.append(
+            f"{len(too_long)} motions longer than {MAX_MOTION_S:g} s left out (a pose the "
+            "detector missed, or a pause in motion; its gyro drift would dominate)"
+        )
+    clipped = _saturated(g, bias, noise_raw)
+    sat = [(i, s, e) for i, s, e in windows if clipped[s:e].any()]
+    if sat:
+        axes = sorted({"xyz"[a] for a in range(3) for _, s, e in sat if clipped[s:e].any()})
+        warn.append(
+            f"the gyro reads its extreme value in {int(clipped.sum())} samples during "
+            f"{len(sat)} motions (axes {', '.join(axes)}): those motions were left out; turn "
+            "more slowly or choose a larger gyro range"
+        )
+    windows = [w for w in windows if w not in too_long and w not in sat]
+    if len(windows) < MIN_MOTIONS:
+        raise ValueError(
+            f"{len(windows)} usable motions between {len(iv)} static poses: the gyro fit needs "
+            f"at least {MIN_MOTIONS} rotations from one still pose to the next, about all "
+            "three axes; record more poses with turns between them"
+        )
+
+    motions, w = _pad_motions(windows, g, dt, bias, dirs, 1.0)
+    k = len(windows)
+    scale = _start_scale(motions, w)
+    units, unit_notes = _resolve_units(units, abs(scale))
+    notes += unit_notes
+    # fit in units of the start scale: C_n near the identity
+    motions = motions._replace(rates=motions.rates * scale)
+    res = _compiled("fit", int(solver[-1]))(jnp.eye(3).ravel(), motions, jnp.asarray(w))
+    C = np.asarray(res.params).reshape(3, 3) * scale
+    cov = np.asarray(res.covariance) * scale**2
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
+    stderr = np.where(np.isfinite(np.asarray(res.stderr).reshape(3, 3)), stderr, np.inf)
+
+    angles = _compiled("angles")
+    deg = lambda c: np.degrees(np.asarray(angles(jnp.asarray(c).ravel(), motions))[:k])  # noqa: E731
+    after = deg(np.asarray(res.params))
+    nominal = UNIT_SCALES.get(units, abs(scale)) * np.sign(scale)
+    before = deg(np.eye(3) * nominal / scale)
+    rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
+    rms_raw = float("nan")
+    if units in UNIT_SCALES:
+        raw_motions, _ = _pad_motions(windows, g, dt, np.zeros(3), dirs, 1.0)
+        raw_angles = angles(jnp.eye(3).ravel() * nominal, raw_motions)
+        rms_raw = rms(np.degrees(np.asarray(raw_angles)[:k]))
+
+    # what the rest noise alone leaves, in the two directions gravity can see: white rate
+    # noise integrated over each motion, and the noise of the two poses' mean directions
+    noise = np.sqrt(np.diag(C @ np.diag(noise_raw**2) @ C.T))
+    durations = np.array([np.sum(dt[s : e - 1]) for _, s, e in windows])
+    pose_dir_var = (
+        np.array([np.mean(np.var(accel.apply(acc[s:e]), axis=0)) / (e - s) for s, e in iv])
+        / np.mean(np.linalg.norm(accel.apply(accel.static_means), axis=1)) ** 2
+    )
+    ends = np.array([pose_dir_var[i] + pose_dir_var[i + 1] for i, _, _ in windows])
+    floor = np.degrees(np.sqrt(2.0 * noise.mean() ** 2 * durations / rate + 2.0 * ends))
+    spread = np.std((pose_means - bias) @ C.T, axis=0)
+
+    solver_status = int(res.status)
+    status = fit_status(solver_status)
+    poor = _poorly_determined(stderr, C)
+    if status == "ok" and poor:
+        status = "poorly_determined"
+    if status == "ok" and rms(after) > 5.0:
+        warn.append(
+            f"the calibrated rotations still miss the poses by {rms(after):.2g} deg RMS: check "
+            "that the accelerometer and gyro share one clock and one frame"
+        )
+    if rms(after) > 2.0 * rms(floor):
+        drift = np.degrees(np.sqrt(2.0) * np.linalg.norm(spread) / np.sqrt(3.0))
+        drift *= float(np.median(durations))
+        notes.append(
+            f"the calibrated rotations miss by {rms(after):.2g} deg, {rms(after) / rms(floor):.1f}"
+            f" x what the rest noise leaves; the bias moves between poses by "
+            f"{np.linalg.norm(spread) / np.sqrt(3.0):.2g} rad/s (std), which over the median "
+            f"turn of {np.median(durations):.2g} s is {drift:.2g} deg: bias drift, which this "
+            "model holds constant, is a candidate for the rest"
+        )
+    notes.append(
+        f"{k} motions between {len(iv)} static poses integrated; bias from "
+        f"{len(rest)} rest samples (Earth's rate, up to 7.3e-5 rad/s, stays in it)"
+    )
+    return GyroCalibration(
+        matrix=C,
+        bias=bias,
+        stderr_matrix=stderr,
+        stderr_bias=np.std(pose_means, axis=0) / np.sqrt(len(iv)),
+        covariance=cov,
+        condition=float(res.condition),
+        status=status,
+        input_units=units,
+        solver=solver,
+        solver_status=solver_status,
+        solver_message=status_message(solver_status),
+        iterations=int(res.iterations),
+        nfev=int(res.nfev),
+        n_poses=len(iv),
+        n_motions=k,
+        rms_raw_deg=rms_raw,
+        rms_before_deg=rms(before),
+        rms_after_deg=rms(after),
+        noise_floor_deg=rms(floor),
+        motion_errors_deg=after,
+        rest_noise=noise,
+        bias_spread=spread,
+        sample_rate=rate,
+        poorly_determined=poor,
+        warnings=warn,
+        notes=notes,
+        sensor_id=sensor_id,
+        source=source,
+    )

@@ -1,0 +1,74 @@
+"""The gyroscope model: true rate = C (raw - b).
+
+C is a general 3 x 3 matrix (nine parameters: three scales and six misalignment terms) and b
+the bias, in raw units. The peers write the same model factored: imu_tk's w = T K (raw - b),
+K the diagonal scale and T the misalignment with unit diagonal (:func:`to_imu_tk`), and
+imucal's w = (K_g R_g)^-1 (raw - b_g) (:mod:`calib_jax.export`). One nine-vector, C row by row,
+is the fitted parameter vector.
+
+The residual is imu_tk's (Tedaldi et al., ICRA 2014): between two consecutive static poses the
+calibrated rates, integrated, must turn the gravity direction of the first pose (from the
+calibrated accelerometer) onto that of the second.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.typing import ArrayLike
+
+from ..rotations import integrate_rates, quat_to_dcm
+
+
+class Motions(NamedTuple):
+    """The rotations between consecutive static poses, padded to one length.
+
+    ``rates`` (K, L, 3) are the raw gyro readings minus the bias, from the last sample of one
+    pose to the first of the next; ``dt`` (K, L) the time from each sample to the next (zero
+    past a motion's end, where the rates are zero too: an identity step); ``before`` and
+    ``after`` (K, 3) the unit gravity directions of the two poses in the sensor frame.
+    """
+
+    rates: jax.Array
+    dt: jax.Array
+    before: jax.Array
+    after: jax.Array
+
+
+def correct(c9: ArrayLike, bias: ArrayLike, raw: ArrayLike) -> jax.Array:
+    """Calibrated rates C (raw - b) for raw readings (..., 3); C is ``c9`` row by row."""
+    return (jnp.asarray(raw) - bias) @ jnp.reshape(c9, (3, 3)).T
+
+
+def motion_rotation(c9: ArrayLike, rates: ArrayLike, dt: ArrayLike) -> jax.Array:
+    """The rotation matrix R of one motion, v_before = R v_after, from de-biased raw rates."""
+    return quat_to_dcm(integrate_rates(jnp.asarray(rates) @ jnp.reshape(c9, (3, 3)).T, dt))
+
+
+def gravity_residual(c9: ArrayLike, motions: Motions) -> jax.Array:
+    """Residual (3K,): R_k' g_before - g_after for every motion, unit gravity directions.
+
+    Its size is the angle (radians, for small errors) by which the integrated rotation misses
+    the second pose's gravity direction. A rotation about gravity itself leaves it unchanged,
+    so only motions with varied axes determine all nine parameters.
+    """
+
+    def one(rates, dt, u0, u1):
+        return motion_rotation(c9, rates, dt).T @ u0 - u1
+
+    return jax.vmap(one)(motions.rates, motions.dt, motions.before, motions.after).ravel()
+
+
+def to_imu_tk(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, K) with C = T K: K the diagonal scale, T the misalignment with unit diagonal."""
+    C = np.asarray(C, float)
+    k = np.diag(C).copy()
+    return C / k[None, :], np.diag(k)
+
+
+def from_imu_tk(T: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """C = T K from imu_tk's misalignment and scale matrices."""
+    return np.asarray(T, float) @ np.asarray(K, float)

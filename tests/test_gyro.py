@@ -1,0 +1,200 @@
+"""The gyroscope: integrator against exact rotations, the fit against simulated truth and the
+imu_tk Xsens log, bad input, the record and the command line."""
+
+import dataclasses
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from calib_jax.accel import calibrate_accel
+from calib_jax.cli import main
+from calib_jax.datasets import demo_log_path, gyro_demo_log_path
+from calib_jax.export import read
+from calib_jax.gyro import GyroCalibration, calibrate_gyro
+from calib_jax.models.gyro import from_imu_tk, to_imu_tk
+from calib_jax.rotations import integrate_rates, quat_to_dcm
+from calib_jax.simulate import random_gyro_matrix, simulate_gyro_log
+
+
+def _two_axis_motion(rate_hz: float, seconds: float = 2.0):
+    """R(t) = Rz(a t) Ry(b t): body rate w = Ry(b t)' (a z) + b y (a varying axis)."""
+    a, b = 1.3, -0.8
+    t = np.arange(int(seconds * rate_hz) + 1) / rate_hz
+    w = Rotation.from_rotvec(np.outer(b * t, [0, 1, 0])).inv().apply([0, 0, a]) + [0, b, 0]
+    R_end = Rotation.from_rotvec([0, 0, a * t[-1]]) * Rotation.from_rotvec([0, b * t[-1], 0])
+    dt = np.append(np.diff(t), 0.0)
+    return w, dt, R_end.as_matrix()
+
+
+def test_integrator_matches_the_exact_rotation_at_second_order():
+    # reference: the closed-form attitude of a rotation with a turning axis (SciPy composes
+    # it). Measured 1.39e-5 rad at 100 Hz, 5.55e-5 at 50 Hz (ratio 4.0: second order). The
+    # bound 3e-5 rad (0.002 deg) is fifty times below the rest-noise floor of the Xsens fit
+    errs = []
+    for hz in (50.0, 100.0):
+        w, dt, R = _two_axis_motion(hz)
+        C = np.asarray(quat_to_dcm(integrate_rates(jnp.asarray(w), jnp.asarray(dt))))
+        errs.append(np.linalg.norm(Rotation.from_matrix(C.T @ R).as_rotvec()))
+    assert errs[1] < 3e-5
+    assert 3.5 < errs[0] / errs[1] < 4.5
+
+
+def test_padding_with_zero_steps_leaves_the_rotation_unchanged():
+    w, dt, _ = _two_axis_motion(100.0)
+    q = integrate_rates(jnp.asarray(w), jnp.asarray(dt))
+    wp = np.concatenate([w, np.zeros((57, 3))])
+    dp = np.concatenate([dt, np.zeros(57)])
+    np.testing.assert_allclose(integrate_rates(jnp.asarray(wp), jnp.asarray(dp)), q, atol=1e-15)
+
+
+def test_imu_tk_factorisation_round_trips():
+    C = random_gyro_matrix(3, scale=1 / 6258)
+    T, K = to_imu_tk(C)
+    np.testing.assert_allclose(np.diag(T), 1.0)
+    np.testing.assert_allclose(from_imu_tk(T, K), C, rtol=1e-14)
+
+
+@settings(max_examples=4)
+@given(
+    seed=st.integers(0, 10_000),
+    scale=st.sampled_from([1 / 6258, np.pi / 180 / 16.4, np.pi / 180, 1.0]),
+    misalignment=st.floats(0.0, 0.03),
+    noise=st.floats(0.001, 0.005),
+)
+def test_fit_recovers_simulated_truth_within_its_standard_errors(seed, scale, misalignment, noise):
+    # counts, counts of a 2000 deg/s MEMS part, deg/s and rad/s: the start scans the scale.
+    # Tolerance 4 standard errors on the largest of nine entries: over 12 seeds the errors
+    # in units of their standard error had a spread of 1.13 (neighbouring motions share a
+    # pose, which the covariance does not model), so P(max of 9 > 4) is about 0.5 %.
+    rng = np.random.default_rng(seed)
+    C = random_gyro_matrix(rng, scale=scale, misalignment=misalignment)
+    b = rng.uniform(-0.05, 0.05, 3) / scale
+    sim = simulate_gyro_log(rng, gyro_matrix=C, gyro_bias=b, gyro_noise=noise)
+    cal = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    assert cal.status == "ok"
+    z = (cal.matrix - C) / cal.stderr_matrix
+    assert np.abs(z).max() < 4.0, z
+    assert np.abs((cal.bias - b) / cal.stderr_bias).max() < 4.0
+    # the calibrated miss is what the rest noise predicts (within 40 %), and far below before
+    assert 0.6 < cal.rms_after_deg / cal.noise_floor_deg < 1.4
+    assert cal.rms_before_deg > 3 * cal.rms_after_deg or misalignment < 0.005
+    expected = {1.0: "rad/s", np.pi / 180: "deg/s"}.get(scale, "counts")
+    assert cal.input_units == expected
+
+
+@pytest.fixture(scope="module")
+def xsens():
+    acc, gyr = np.loadtxt(demo_log_path()), np.loadtxt(gyro_demo_log_path())
+    return acc, gyr
+
+
+def test_xsens_rotation_error_before_and_after(xsens, tmp_path):
+    # imu_tk's own log (no published calibration): measured 3.22 deg RMS between poses with
+    # the best single scale and the rest bias, 0.57 deg calibrated, 0.11 deg from the rest
+    # noise alone; the rest is mostly bias drift between poses (the note says so)
+    acc, gyr = xsens
+    cal = calibrate_gyro(acc[:, 1:], gyr[:, 1:], t=acc[:, 0], accel_options={"g": 9.81744})
+    assert cal.status == "ok" and cal.n_motions == 37
+    assert cal.rms_before_deg > 3.0 and cal.rms_after_deg < 0.65
+    assert cal.rms_after_deg > cal.noise_floor_deg
+    assert any("bias drift" in n for n in cal.notes)
+    # one scale for all three axes, near the 2.09e-4 rad/s per count found here (imu_tk's
+    # start is 1/6258 = 1.60e-4), misalignments below 5 %
+    K = np.diag(cal.matrix)
+    assert np.allclose(K, 2.095e-4, rtol=0.01)
+    T, _ = cal.imu_tk()
+    assert np.abs(T - np.eye(3)).max() < 0.05
+    path = tmp_path / "gyro.json"
+    cal.save(path)
+    assert GyroCalibration.load(path) == cal
+    d = json.loads(path.read_text())
+    np.testing.assert_allclose(d["correction"]["matrix"], cal.matrix)
+    np.testing.assert_allclose(np.linalg.inv(d["forward"]["matrix"]), cal.matrix, rtol=1e-10)
+    c = read(path)["gyro"]
+    np.testing.assert_allclose(c.apply(gyr[:5, 1:]), cal.apply(gyr[:5, 1:]))
+
+
+def test_cli_takes_the_two_xsens_files_and_apply_corrects_the_gyro(tmp_path, capsys):
+    out = tmp_path / "g.json"
+    rc = main(["gyro", str(demo_log_path()), str(gyro_demo_log_path()), "--json", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "rotation error between poses" in text and "imu_tk form" in text
+    csv = tmp_path / "g.csv"
+    assert main(["apply", str(out), str(gyro_demo_log_path()), "--out", str(csv)]) == 0
+    head = csv.read_text().splitlines()[:2]
+    assert head[0] == "t,gx,gy,gz"
+    raw = np.loadtxt(gyro_demo_log_path(), max_rows=1)[1:]
+    np.testing.assert_allclose(
+        [float(v) for v in head[1].split(",")[1:]], GyroCalibration.load(out).apply(raw), rtol=1e-9
+    )
+
+
+def test_cli_without_gyro_columns_says_how_to_give_them(capsys):
+    assert main(["gyro", str(demo_log_path())]) == 2
+    err = capsys.readouterr().err
+    assert "no gyro columns" in err and "GYRO_FILE" in err
+
+
+# ---- bad input: each a named error with the fix ---------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return simulate_gyro_log(5, n_poses=12)
+
+
+@pytest.mark.parametrize(
+    ("axes", "match"),
+    [
+        ([[1.0, 0.0, 0.0]], "one axis only.*x axis"),
+        ([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], "two axes only.*nothing turned about z axis"),
+    ],
+)
+def test_turns_about_too_few_axes_name_the_undetermined_ones(axes, match):
+    s = simulate_gyro_log(6, n_poses=12, axes=np.array(axes))
+    with pytest.raises(ValueError, match=match + ".*turn the sensor about all three"):
+        calibrate_gyro(s.acc, s.gyro, t=s.t)
+
+
+def test_too_few_motions(sim):
+    # too few poses for the accelerometer stop at its own error (it needs nine); with an
+    # accelerometer calibration that kept four of the log's poses, the gyro says so itself
+    n = np.flatnonzero(sim.pose == 3)[-1] + 1
+    with pytest.raises(ValueError, match="only 4 distinct poses"):
+        calibrate_gyro(sim.acc[:n], sim.gyro[:n], t=sim.t[:n])
+    acc = calibrate_accel(sim.acc, sample_rate=sim.sample_rate)
+    four = dataclasses.replace(acc, static_intervals=acc.static_intervals[:4])
+    with pytest.raises(ValueError, match="3 usable motions between 4 static poses.*at least 4"):
+        calibrate_gyro(sim.acc, sim.gyro, t=sim.t, accel=four)
+
+
+def test_declared_units_that_contradict_the_rotations(sim):
+    deg = simulate_gyro_log(5, n_poses=12, gyro_matrix=np.eye(3) * np.pi / 180)
+    with pytest.raises(ValueError, match="units='rad/s'.*they are deg/s"):
+        calibrate_gyro(deg.acc, deg.gyro, t=deg.t, units="rad/s")
+
+
+def test_clock_and_length_problems(sim):
+    with pytest.raises(ValueError, match="must share one clock"):
+        calibrate_gyro(sim.acc, sim.gyro[:-5], t=sim.t)
+    with pytest.raises(ValueError, match="neither a time column nor a sample rate"):
+        calibrate_gyro(sim.acc, sim.gyro)
+    t = sim.t.copy()
+    t[100] = t[99]
+    with pytest.raises(ValueError, match="time column must increase"):
+        calibrate_gyro(sim.acc, sim.gyro, t=t)
+
+
+def test_saturated_turns_are_left_out_with_a_warning(sim):
+    g = sim.gyro.copy()
+    top = np.percentile(g[:, 0], 99.9)
+    g[:, 0] = np.minimum(g[:, 0], top)  # clip the fastest turn's x axis
+    cal = calibrate_gyro(sim.acc, g, t=sim.t)
+    assert any("extreme value" in w and "left out" in w for w in cal.warnings)
+    assert cal.n_motions < 11
