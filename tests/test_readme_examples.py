@@ -50,7 +50,8 @@ def test_readme_commands_run_as_written(tmp_path, monkeypatch, capsys):
     """Each command of the README's task table runs as written, with its placeholders (the
     reader's own files) filled with logs shipped in the package: ``log.csv`` is the Xsens
     recording written as CSV for accel and diagnose, the CK-Explorer tumble for mag and marg;
-    ``logs/`` holds both CSV copies of the Xsens log; the serial port is a simulated board
+    ``log.csv`` for gyro is the Xsens accelerometer and gyro pair as one CSV; ``logs/`` holds
+    both CSV copies of the Xsens log; the serial port is a simulated board
     (48 poses at 20x speed), so ``record`` stops on its own when the 48 poses are covered.
     ``apply`` and ``export`` use the calibration the accel row wrote. Exit 0 and the files
     each command says it writes."""
@@ -64,12 +65,18 @@ def test_readme_commands_run_as_written(tmp_path, monkeypatch, capsys):
 
     commands = readme_commands()
     verbs = [c.split()[1] for c in commands]
-    assert verbs == ["accel", "mag", "marg", "diagnose", "batch", "record", "apply", "export"]
+    assert verbs == [
+        "accel", "mag", "marg", "gyro", "diagnose", "batch", "record", "apply", "export"
+    ]  # fmt: skip
     xsens = cj.load_log(cj.demo_log_path())
     xsens_csv = tmp_path / "xsens.csv"
     rows = np.column_stack([xsens.t, xsens.acc])
     np.savetxt(xsens_csv, rows, delimiter=",", header="t,ax,ay,az", comments="", fmt="%.9g")
-    logs = {"accel": xsens_csv, "diagnose": xsens_csv, "apply": xsens_csv}
+    gyro = cj.load_log(cj.gyro_demo_log_path(), sensor="gyro").gyro
+    imu_csv = tmp_path / "xsens_imu.csv"
+    rows = np.column_stack([xsens.t, xsens.acc, gyro])
+    np.savetxt(imu_csv, rows, delimiter=",", header="t,ax,ay,az,gx,gy,gz", comments="", fmt="%.9g")
+    logs = {"accel": xsens_csv, "diagnose": xsens_csv, "apply": xsens_csv, "gyro": imu_csv}
     logs |= {"mag": cj.mag_demo_log_path(), "marg": cj.mag_demo_log_path()}
     work = tmp_path / "work"
     (work / "logs").mkdir(parents=True)
@@ -87,7 +94,8 @@ def test_readme_commands_run_as_written(tmp_path, monkeypatch, capsys):
     finally:
         board.kill()
         board.wait()
-    for name in ("cal.json", "cal.png", "all.json", "all.csv", "imu.csv", "imu.calib.json"):
+    names = ("cal.json", "cal.png", "gyro.json", "all.json", "all.csv", "imu.csv")
+    for name in (*names, "imu.calib.json"):
         assert (work / name).stat().st_size > 0, name
     assert any((work / "figures").iterdir())
     assert cj.BatchRecord.load(work / "all.json").statuses == ["ok", "ok"]
