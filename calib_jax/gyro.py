@@ -96,6 +96,11 @@ class GyroCalibration(Record):
     """Standard deviation of the per-pose rest means about the bias, rad/s (3,): drift."""
     sample_rate: float
     output_units: str = "rad/s"
+    g_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    """G (3 x 3), input units per m/s^2 of calibrated acceleration: w = C (raw - b - G a).
+    Zero unless the protocol measured it (Ferraris: imucal's K_ga)."""
+    method: str = "poses"
+    """'poses' (imu_tk: gravity carried between static poses) or 'ferraris' (known turns)."""
     poorly_determined: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -112,10 +117,14 @@ class GyroCalibration(Record):
 
         return is_usable(self.status)
 
-    def apply(self, raw) -> np.ndarray:
-        """Calibrated rates C (raw - b), rad/s, for one reading (3,), many (N, 3) or a loaded
-        log's gyro columns; inside JAX use :func:`calib_jax.models.gyro.correct`."""
-        return (_raw_vectors(raw, "gyro") - self.bias) @ self.matrix.T
+    def apply(self, raw, acc=None) -> np.ndarray:
+        """Calibrated rates C (raw - b - G a), rad/s, for one reading (3,), many (N, 3) or a
+        loaded log's gyro columns; ``acc`` the calibrated acceleration (m/s^2) of the same
+        samples when G is not zero. Inside JAX use :func:`calib_jax.models.gyro.correct`."""
+        x = _raw_vectors(raw, "gyro") - self.bias
+        if acc is not None:
+            x = x - np.asarray(acc, float) @ self.g_sensitivity.T
+        return x @ self.matrix.T
 
     def imu_tk(self) -> tuple[np.ndarray, np.ndarray]:
         """imu_tk's (T, K): misalignment with unit diagonal and diagonal scale, C = T K."""
@@ -153,11 +162,17 @@ class GyroCalibration(Record):
             + ", ".join(f"{T[i, j]:+.4f}" for i in range(3) for j in range(3) if i != j)
         )
         raw = "" if np.isnan(self.rms_raw_deg) else f"as read {self.rms_raw_deg:.3g}, "
-        out.append(
-            f"rotation error between poses (RMS over {self.n_motions} motions, degrees): {raw}"
-            f"nominal scale and rest bias {self.rms_before_deg:.3g}, calibrated "
-            f"{self.rms_after_deg:.3g} (the rest noise alone: {self.noise_floor_deg:.3g})"
-        )
+        if self.method == "ferraris":
+            out.append(
+                "g-sensitivity G (input units per m/s^2), rows: "
+                + "; ".join(", ".join(f"{v:+.4g}" for v in row) for row in self.g_sensitivity)
+            )
+        else:
+            out.append(
+                f"rotation error between poses (RMS over {self.n_motions} motions, degrees): "
+                f"{raw}nominal scale and rest bias {self.rms_before_deg:.3g}, calibrated "
+                f"{self.rms_after_deg:.3g} (the rest noise alone: {self.noise_floor_deg:.3g})"
+            )
         out.append(
             "rest noise per sample (rad/s): "
             + ", ".join(f"{s:.3g}" for s in self.rest_noise)
@@ -186,6 +201,11 @@ class GyroCalibration(Record):
                 "units": {"input": self.input_units, "output": self.output_units},
                 **linear_forms(correction=self.matrix, offset=self.bias),
                 "imu_tk": {"misalignment": T.tolist(), "scale": np.diag(K).tolist()},
+                "g_sensitivity": {
+                    "matrix": np.asarray(self.g_sensitivity).tolist(),
+                    "model": "true = correction.matrix @ (raw - offset - matrix @ a), a in m/s^2",
+                },
+                "method": self.method,
                 "stderr": {
                     "correction": np.asarray(self.stderr_matrix).tolist(),
                     "offset": np.asarray(self.stderr_bias).tolist(),
@@ -251,6 +271,8 @@ class GyroCalibration(Record):
             motion_errors_deg=r.arr("motion_errors_deg", (-1,), finite=False),
             rest_noise=r.arr("rest_noise", (3,), finite=False),
             bias_spread=r.arr("bias_spread", (3,), finite=False),
+            g_sensitivity=r.arr("g_sensitivity.matrix", (3, 3), default=np.zeros((3, 3))),
+            method=r.text("method"),
             poorly_determined=r.strings("poorly_determined"),
             warnings=r.strings("warnings"),
             notes=r.strings("notes"),
@@ -673,4 +695,107 @@ def calibrate_gyro(
         notes=notes,
         sensor_id=sensor_id,
         source=source,
+    )
+
+
+FERRARIS_FACES = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
+FERRARIS_TURNS = ("x_rot", "y_rot", "z_rot")
+
+
+def calibrate_gyro_ferraris(
+    acc: np.ndarray,
+    gyro: np.ndarray,
+    sections: dict[str, tuple],
+    sample_rate: float,
+    *,
+    angle_deg: float = -360.0,
+    g: float = 9.81,
+    sensor_id: str | None = None,
+) -> GyroCalibration:
+    """The gyroscope from a Ferraris session (imucal's protocol and equations, Ferraris et al.
+    1995): six still faces and one full turn about each axis.
+
+    ``sections`` maps imucal's section names (``x_p``, ``x_a``, ... ``z_a``, ``x_rot``,
+    ``y_rot``, ``z_rot``; ``_p`` the axis up, ``_a`` down) to [start, stop) sample ranges, as
+    imucal's section list does. The bias is the mean over the faces; the g-sensitivity G =
+    (U_p - U_a) / 2g from the faces' means; the accelerometer's own Ferraris correction
+    (faces' half-differences and means) removes G a during the turns; then the rates summed
+    over each turn, W (columns x, y, z), must equal ``angle_deg`` about that axis, so
+    C = angle W^-1. imucal's default angle is -360 (its protocol turns clockwise, seen from
+    above). The turns are summed, not integrated as rotations (a full turn is the identity
+    rotation, so only its unwrapped angle says anything): the turns must stay about one axis.
+    Three turns determine C exactly: the standard errors come from the rest noise alone.
+    """
+    acc, gyro = np.asarray(acc, float), np.asarray(gyro, float)
+    missing = [k for k in FERRARIS_FACES + FERRARIS_TURNS if k not in sections]
+    if missing:
+        raise ValueError(
+            f"a Ferraris session needs the sections {', '.join(FERRARIS_FACES + FERRARIS_TURNS)}"
+            f"; missing: {', '.join(missing)}"
+        )
+    part = {k: slice(*map(int, sections[k])) for k in FERRARIS_FACES + FERRARIS_TURNS}
+    for k, sl in part.items():
+        if sl.stop - sl.start < 2 or sl.start < 0 or sl.stop > len(gyro):
+            raise ValueError(f"section {k} = [{sl.start}, {sl.stop}) is not inside the log")
+    mean = {k: gyro[part[k]].mean(axis=0) for k in FERRARIS_FACES}
+    amean = {k: acc[part[k]].mean(axis=0) for k in FERRARIS_FACES}
+    faces = np.concatenate([gyro[part[k]] for k in FERRARIS_FACES])
+    bias = faces.mean(axis=0)
+    up = np.column_stack([mean[f"{a}_p"] for a in "xyz"])
+    down = np.column_stack([mean[f"{a}_a"] for a in "xyz"])
+    G = (up - down) / (2.0 * g)
+    # the accelerometer's Ferraris correction: raw = A a + b_a with A's columns the faces'
+    # half-differences per g
+    A = (
+        np.column_stack([amean[f"{a}_p"] for a in "xyz"])
+        - np.column_stack([amean[f"{a}_a"] for a in "xyz"])
+    ) / (2.0 * g)
+    b_a = np.mean([amean[k] for k in FERRARIS_FACES], axis=0)
+    W = np.zeros((3, 3))
+    n_turn = np.zeros(3)
+    for j, k in enumerate(FERRARIS_TURNS):
+        a_cal = np.linalg.solve(A, (acc[part[k]] - b_a).T).T
+        W[:, j] = np.sum(gyro[part[k]] - bias - a_cal @ G.T, axis=0) / sample_rate
+        n_turn[j] = part[k].stop - part[k].start
+    angle = np.deg2rad(angle_deg)
+    C = angle * np.linalg.inv(W)
+    # rest noise per axis, propagated through C = angle W^-1 (dC = -C dW W^-1)
+    noise_raw = np.sqrt(np.mean([np.var(gyro[part[k]], axis=0) for k in FERRARIS_FACES], axis=0))
+    s_w = noise_raw[:, None] * np.sqrt(n_turn)[None, :] / sample_rate  # sd of W[l, j]
+    Winv = np.linalg.inv(W)
+    se = np.sqrt(np.einsum("il,jk,lj->ik", C**2, Winv**2, s_w**2))
+    face_means = np.array([mean[k] for k in FERRARIS_FACES])
+    return GyroCalibration(
+        matrix=C,
+        bias=bias,
+        stderr_matrix=se,
+        stderr_bias=noise_raw / np.sqrt(len(faces)),
+        covariance=np.diag(se.ravel() ** 2),
+        condition=float(np.linalg.cond(W)),
+        status="ok",
+        input_units="counts",
+        solver="ferraris",
+        solver_status=-1,
+        solver_message="closed form (imucal's Ferraris equations): three turns, nine entries",
+        iterations=0,
+        nfev=0,
+        n_poses=6,
+        n_motions=3,
+        rms_raw_deg=float("nan"),
+        rms_before_deg=float("nan"),
+        rms_after_deg=float("nan"),
+        noise_floor_deg=float("nan"),
+        motion_errors_deg=np.zeros(0),
+        rest_noise=np.sqrt(np.diag(C @ np.diag(noise_raw**2) @ C.T)),
+        bias_spread=np.std((face_means - bias) @ C.T, axis=0),
+        sample_rate=float(sample_rate),
+        g_sensitivity=G,
+        method="ferraris",
+        notes=[
+            f"Ferraris turns of {angle_deg:g} deg each; exactly determined, so no residual: "
+            "the standard errors are the rest noise propagated",
+            "the covariance holds the variances only (the entries' correlations are not "
+            "propagated)",
+        ],
+        sensor_id=sensor_id,
     )

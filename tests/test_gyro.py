@@ -15,10 +15,12 @@ from calib_jax.accel import calibrate_accel
 from calib_jax.cli import main
 from calib_jax.datasets import demo_log_path, gyro_demo_log_path
 from calib_jax.export import read
-from calib_jax.gyro import GyroCalibration, calibrate_gyro
+from calib_jax.gyro import GyroCalibration, calibrate_gyro, calibrate_gyro_ferraris
 from calib_jax.models.gyro import from_imu_tk, to_imu_tk
 from calib_jax.rotations import integrate_rates, quat_to_dcm
 from calib_jax.simulate import random_gyro_matrix, simulate_gyro_log
+
+from .conftest import shared_file
 
 
 def _two_axis_motion(rate_hz: float, seconds: float = 2.0):
@@ -198,3 +200,33 @@ def test_saturated_turns_are_left_out_with_a_warning(sim):
     cal = calibrate_gyro(sim.acc, g, t=sim.t)
     assert any("extreme value" in w and "left out" in w for w in cal.warnings)
     assert cal.n_motions < 11
+
+
+def test_ferraris_reproduces_imucals_published_calibration(tmp_path):
+    # imucal's regression snapshot (example_cal.json) from its annotated session: w = R_g^-1
+    # K_g^-1 (raw - b_g - K_ga a) in deg/s; ours is C = (pi / 180) (K_g R_g)^-1 in rad/s. Same
+    # equations; the one difference is the accelerometer correction that removes K_ga a
+    # during the turns (ours: the faces' closed form; imucal's: its K_a R_a), which moves C
+    # by 4.4e-7 relative, 0.004 of its standard error. Bias and K_ga: to round-off.
+    path = shared_file("imucal_ferraris/annotated_session.csv")
+    ref = json.loads(shared_file("imucal_ferraris/example_cal.json").read_text())
+    part = np.loadtxt(path, delimiter=",", skiprows=1, usecols=0, dtype=str)
+    x = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(1, 8))
+    sections = {}
+    for name in np.unique(part):
+        idx = np.flatnonzero(part == name)
+        sections[str(name)] = (idx[0], idx[-1] + 1)
+    cal = calibrate_gyro_ferraris(x[:, 1:4], x[:, 4:7], sections, sample_rate=204.8)
+    C_ref = np.deg2rad(1.0) * np.linalg.inv(np.array(ref["K_g"]) @ np.array(ref["R_g"]))
+    np.testing.assert_allclose(cal.matrix, C_ref, rtol=0, atol=1e-6 * np.abs(C_ref).max())
+    assert np.abs((cal.matrix - C_ref) / cal.stderr_matrix).max() < 0.1
+    np.testing.assert_allclose(cal.bias, ref["b_g"], rtol=1e-12)
+    np.testing.assert_allclose(cal.g_sensitivity, ref["K_ga"], rtol=1e-9, atol=1e-15)
+    # R_g is about -I: the session's turns read positive where imucal's protocol expects
+    # -360 deg, so its gyro axes point opposite to the accelerometer's
+    assert np.all(np.diag(cal.matrix) < 0)
+    cal.save(tmp_path / "f.json")
+    assert GyroCalibration.load(tmp_path / "f.json") == cal
+    with pytest.raises(ValueError, match="missing: z_rot"):
+        no_z = {k: v for k, v in sections.items() if k != "z_rot"}
+        calibrate_gyro_ferraris(x[:, 1:4], x[:, 4:7], no_z, sample_rate=204.8)
