@@ -36,6 +36,7 @@ from .calibration import (
     _fields_equal,
     _raw_vectors,
     _sanitize,
+    _unsanitize,
     linear_forms,
 )
 from .io.files import SensorLog
@@ -96,9 +97,20 @@ class GyroCalibration(Record):
     """Standard deviation of the per-pose rest means about the bias, rad/s (3,): drift."""
     sample_rate: float
     output_units: str = "rad/s"
+    angle_random_walk: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    """Per axis, rad/s/sqrt(Hz) (= rad/sqrt(s)): the Allan deviation's white-noise line at
+    tau = 1 s, from the longest rest; NaN when the rest is too short to show it."""
+    bias_instability: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    """Per axis, rad/s: the Allan deviation's minimum / 0.664 (its flat floor), if the longest
+    rest reaches it (else the smallest value seen, a bound from above)."""
+    allan_rest_s: float = float("nan")
+    """Length of the rest the Allan deviation was taken from, s."""
     g_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     """G (3 x 3), input units per m/s^2 of calibrated acceleration: w = C (raw - b - G a).
     Zero unless the protocol measured it (Ferraris: imucal's K_ga)."""
+    effects: dict = field(default_factory=dict)
+    """Effects beyond the model that were tested and added, with the error without and with
+    each (``g_sensitivity``: its F test, the rest spread and the miss before and after)."""
     method: str = "poses"
     """'poses' (imu_tk: gravity carried between static poses) or 'ferraris' (known turns)."""
     poorly_determined: list[str] = field(default_factory=list)
@@ -162,12 +174,12 @@ class GyroCalibration(Record):
             + ", ".join(f"{T[i, j]:+.4f}" for i in range(3) for j in range(3) if i != j)
         )
         raw = "" if np.isnan(self.rms_raw_deg) else f"as read {self.rms_raw_deg:.3g}, "
-        if self.method == "ferraris":
+        if np.any(self.g_sensitivity != 0):
             out.append(
                 "g-sensitivity G (input units per m/s^2), rows: "
                 + "; ".join(", ".join(f"{v:+.4g}" for v in row) for row in self.g_sensitivity)
             )
-        else:
+        if self.method != "ferraris":
             out.append(
                 f"rotation error between poses (RMS over {self.n_motions} motions, degrees): "
                 f"{raw}nominal scale and rest bias {self.rms_before_deg:.3g}, calibrated "
@@ -179,6 +191,15 @@ class GyroCalibration(Record):
             + "; pose-to-pose bias spread (rad/s): "
             + ", ".join(f"{s:.3g}" for s in self.bias_spread)
         )
+        if np.all(np.isfinite(self.angle_random_walk)):
+            arw = np.degrees(self.angle_random_walk) * 60.0
+            out.append(
+                f"Allan deviation of the {self.allan_rest_s:.3g} s rest: angle random walk "
+                + ", ".join(f"{v:.3g}" for v in arw)
+                + " deg/sqrt(h); bias instability "
+                + ", ".join(f"{v:.3g}" for v in np.degrees(self.bias_instability) * 3600)
+                + " deg/h"
+            )
         out.append(
             f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations); "
             f"condition number {self.condition:.3g}; status: {self.status}"
@@ -206,6 +227,7 @@ class GyroCalibration(Record):
                     "model": "true = correction.matrix @ (raw - offset - matrix @ a), a in m/s^2",
                 },
                 "method": self.method,
+                "effects": self.effects,
                 "stderr": {
                     "correction": np.asarray(self.stderr_matrix).tolist(),
                     "offset": np.asarray(self.stderr_bias).tolist(),
@@ -228,6 +250,12 @@ class GyroCalibration(Record):
                 "motion_errors_deg": np.asarray(self.motion_errors_deg).tolist(),
                 "rest_noise": np.asarray(self.rest_noise).tolist(),
                 "bias_spread": np.asarray(self.bias_spread).tolist(),
+                "allan": {
+                    "angle_random_walk": np.asarray(self.angle_random_walk).tolist(),
+                    "bias_instability": np.asarray(self.bias_instability).tolist(),
+                    "rest_s": self.allan_rest_s,
+                    "units": "rad/s/sqrt(Hz), rad/s, s",
+                },
                 "poorly_determined": list(self.poorly_determined),
                 "warnings": list(self.warnings),
                 "notes": list(self.notes),
@@ -271,8 +299,12 @@ class GyroCalibration(Record):
             motion_errors_deg=r.arr("motion_errors_deg", (-1,), finite=False),
             rest_noise=r.arr("rest_noise", (3,), finite=False),
             bias_spread=r.arr("bias_spread", (3,), finite=False),
+            angle_random_walk=r.arr("allan.angle_random_walk", (3,), finite=False),
+            bias_instability=r.arr("allan.bias_instability", (3,), finite=False),
+            allan_rest_s=r.num("allan.rest_s", finite=False),
             g_sensitivity=r.arr("g_sensitivity.matrix", (3, 3), default=np.zeros((3, 3))),
             method=r.text("method"),
+            effects=_unsanitize(r.get("effects", {})),
             poorly_determined=r.strings("poorly_determined"),
             warnings=r.strings("warnings"),
             notes=r.strings("notes"),
@@ -384,8 +416,9 @@ def _motion_windows(intervals: np.ndarray) -> list[tuple[int, int, int]]:
     return [(i, iv[i][1] - 1, iv[i + 1][0] + 1) for i in range(len(iv) - 1)]
 
 
-def _pad_motions(windows, g, dt, bias, dirs, scale) -> tuple[Motions, np.ndarray]:
-    """Motions padded to powers of two in count and length (zero rates and steps, weight 0)."""
+def _pad_motions(windows, rates_of, dt, dirs) -> tuple[Motions, np.ndarray]:
+    """Motions padded to powers of two in count and length (zero rates and steps, weight 0);
+    ``rates_of(s, e)`` gives the de-biased raw rates of samples [s, e)."""
     k = bucket(len(windows)) if len(windows) > 8 else 8
     length = bucket(max(e - s for _, s, e in windows))
     rates = np.zeros((k, length, 3))
@@ -393,12 +426,55 @@ def _pad_motions(windows, g, dt, bias, dirs, scale) -> tuple[Motions, np.ndarray
     before = np.tile([0.0, 0.0, 1.0], (k, 1))
     after = before.copy()
     for j, (i, s, e) in enumerate(windows):
-        rates[j, : e - s] = (g[s:e] - bias) * scale
+        rates[j, : e - s] = rates_of(s, e)
         steps[j, : e - s - 1] = dt[s : e - 1]
         before[j], after[j] = dirs[i], dirs[i + 1]
     w = np.zeros(k)
     w[: len(windows)] = 1.0
     return Motions(*(jnp.asarray(a) for a in (rates, steps, before, after))), w
+
+
+def _g_sensitivity(pose_means: np.ndarray, pose_acc: np.ndarray) -> dict:
+    """Does the rest bias follow the acceleration? The pose means regressed on b + G a (a in
+    m/s^2), against a constant b: an F test of the nine entries of G (accepted at p < 1e-3),
+    and the spread of the pose means about each model."""
+    from scipy.stats import f as f_dist
+
+    n = len(pose_means)
+    X = np.column_stack([np.ones(n), pose_acc])
+    coef = np.linalg.lstsq(X, pose_means, rcond=None)[0]
+    rss0 = float(np.sum((pose_means - pose_means.mean(axis=0)) ** 2))
+    resid = pose_means - X @ coef
+    rss1 = float(np.sum(resid**2))
+    dof = 3 * n - 12
+    if dof < 3 or rss1 <= 0:
+        return {"accepted": False, "F": float("nan"), "p": float("nan"), "poses": n}
+    F = ((rss0 - rss1) / 9.0) / (rss1 / dof)
+    p = float(f_dist.sf(F, 9, dof))
+    return {
+        "accepted": bool(p < 1e-3),
+        "F": float(F),
+        "p": p,
+        "poses": n,
+        "bias": coef[0],
+        "G": coef[1:].T,
+        "spread_before": pose_means.std(axis=0),
+        "spread_after": resid.std(axis=0),
+    }
+
+
+def _fit_scaled(motions: Motions, w: np.ndarray, scale: float, solver: str):
+    """The LM fit of C in units of the start scale (C_n near the identity): (C, covariance,
+    standard errors, the solver's result, per-motion miss in degrees)."""
+    k = int(w.sum())
+    motions = motions._replace(rates=motions.rates * scale)
+    res = _compiled("fit", int(solver[-1]))(jnp.eye(3).ravel(), motions, jnp.asarray(w))
+    C = np.asarray(res.params).reshape(3, 3) * scale
+    cov = np.asarray(res.covariance) * scale**2
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
+    stderr = np.where(np.isfinite(np.asarray(res.stderr).reshape(3, 3)), stderr, np.inf)
+    miss = np.degrees(np.asarray(_compiled("angles")(res.params, motions))[:k])
+    return C, cov, stderr, res, miss
 
 
 def _check_turn_axes(g: np.ndarray) -> None:
@@ -465,6 +541,13 @@ def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
     return "counts", [f"gyro units: raw counts, {1 / scale:.5g} counts per rad/s"]
 
 
+def _allan_fields(g, intervals, bias, C, rate) -> dict:
+    """The Allan noise terms of the longest rest, calibrated (rad/s)."""
+    s, e = max(np.asarray(intervals).tolist(), key=lambda se: se[1] - se[0])
+    arw, bi = allan_noise((g[s:e] - bias) @ C.T, rate)
+    return {"angle_random_walk": arw, "bias_instability": bi, "allan_rest_s": (e - s) / rate}
+
+
 def _poorly_determined(stderr: np.ndarray, C: np.ndarray) -> list[str]:
     out = []
     for i in range(3):
@@ -473,6 +556,45 @@ def _poorly_determined(stderr: np.ndarray, C: np.ndarray) -> list[str]:
             if not np.isfinite(se) or se > 0.05 * ref:
                 out.append(f"C[{i},{j}]")
     return out
+
+
+def allan_deviation(
+    x: np.ndarray, sample_rate: float, taus: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Overlapping Allan deviation of rate samples x (N,) or (N, k): (taus in s, sigma (T,) or
+    (T, k)). Default taus: 40 log-spaced cluster sizes from one sample to a ninth of the
+    record (the estimate needs many clusters)."""
+    x = np.asarray(x, float)
+    n = len(x)
+    tau0 = 1.0 / sample_rate
+    if taus is None:
+        m = np.unique(np.logspace(0, np.log10(max(n // 9, 1)), 40).astype(int))
+    else:
+        m = np.unique(np.maximum(np.round(np.asarray(taus) / tau0), 1).astype(int))
+    m = m[m < n // 2]
+    theta = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0) * tau0])
+    out = []
+    for k in m:
+        d = theta[2 * k :] - 2.0 * theta[k:-k] + theta[: -2 * k]
+        out.append(np.sqrt(np.mean(d**2, axis=0) / (2.0 * (k * tau0) ** 2)))
+    return m * tau0, np.array(out)
+
+
+def allan_noise(x: np.ndarray, sample_rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """(angle random walk N, bias instability B) per column of rest rates x (N, k).
+
+    N: the white-noise line sigma(tau) sqrt(tau) read where the deviation still falls as
+    tau^-1/2 (the median over taus up to 1/20 of the record, whose slope must lie within 0.15
+    of -1/2; else NaN). B: min sigma / 0.664 (IEEE 952; a bound when the record is too short
+    for the floor)."""
+    taus, sig = allan_deviation(x, sample_rate)
+    if len(taus) < 4:
+        return np.full(x.shape[1], np.nan), np.full(x.shape[1], np.nan)
+    short = taus <= max(taus[0] * 4, len(x) / sample_rate / 20)
+    slope = np.polyfit(np.log(taus[short]), np.log(sig[short]), 1)[0]
+    arw = np.median(sig[short] * np.sqrt(taus[short])[:, None], axis=0)
+    arw = np.where(np.abs(slope + 0.5) < 0.15, arw, np.nan)
+    return arw, sig.min(axis=0) / 0.664
 
 
 def calibrate_gyro(
@@ -486,6 +608,7 @@ def calibrate_gyro(
     solver: str = "lm1",
     sensor_id: str | None = None,
     accel_options: dict | None = None,
+    g_sensitivity: bool = True,
 ) -> GyroCalibration:
     """Calibrate a gyroscope from a multi-position log with rotations between the poses.
 
@@ -511,6 +634,10 @@ def calibrate_gyro(
         the scale is within 25 % of theirs.
     solver : {"lm1", "lm2", "lm3"}
         Gavin LM update type.
+    g_sensitivity : bool
+        Test whether the rest bias follows the acceleration (the pose means regressed on
+        b + G a, an F test of G at p < 1e-3) and, when it does, remove b + G a during the
+        turns and refit; the record's ``effects`` holds the test and the miss with and without.
 
     Raises
     ------
@@ -605,30 +732,62 @@ def calibrate_gyro(
             "three axes; record more poses with turns between them"
         )
 
-    motions, w = _pad_motions(windows, g, dt, bias, dirs, 1.0)
+    motions, w = _pad_motions(windows, lambda s, e: g[s:e] - bias, dt, dirs)
     k = len(windows)
     scale = _start_scale(motions, w)
     units, unit_notes = _resolve_units(units, abs(scale))
     notes += unit_notes
-    # fit in units of the start scale: C_n near the identity
-    motions = motions._replace(rates=motions.rates * scale)
-    res = _compiled("fit", int(solver[-1]))(jnp.eye(3).ravel(), motions, jnp.asarray(w))
-    C = np.asarray(res.params).reshape(3, 3) * scale
-    cov = np.asarray(res.covariance) * scale**2
-    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
-    stderr = np.where(np.isfinite(np.asarray(res.stderr).reshape(3, 3)), stderr, np.inf)
-
+    C, cov, stderr, res, after = _fit_scaled(motions, w, scale, solver)
     angles = _compiled("angles")
-    deg = lambda c: np.degrees(np.asarray(angles(jnp.asarray(c).ravel(), motions))[:k])  # noqa: E731
-    after = deg(np.asarray(res.params))
-    nominal = UNIT_SCALES.get(units, abs(scale)) * np.sign(scale)
-    before = deg(np.eye(3) * nominal / scale)
     rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
+    nominal = UNIT_SCALES.get(units, abs(scale)) * np.sign(scale)
+    before = np.degrees(np.asarray(angles(jnp.eye(3).ravel() * nominal, motions))[:k])
     rms_raw = float("nan")
     if units in UNIT_SCALES:
-        raw_motions, _ = _pad_motions(windows, g, dt, np.zeros(3), dirs, 1.0)
+        raw_motions, _ = _pad_motions(windows, lambda s, e: g[s:e], dt, dirs)
         raw_angles = angles(jnp.eye(3).ravel() * nominal, raw_motions)
         rms_raw = rms(np.degrees(np.asarray(raw_angles)[:k]))
+
+    # close the loop on the rests: a bias that follows the acceleration is g-sensitivity
+    to_ms2 = 9.80665 if accel.output_units == "g" else 1.0
+    pose_acc = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv])) * to_ms2
+    gs = _g_sensitivity(pose_means, pose_acc) if g_sensitivity else {"accepted": False}
+    G = np.zeros((3, 3))
+    effects: dict = {}
+    if gs["accepted"]:
+        G, b_g = gs["G"], gs["bias"]
+
+        def rates_g(s, e):
+            return g[s:e] - b_g - (accel.apply(acc[s:e]) * to_ms2) @ G.T
+
+        motions_g, _ = _pad_motions(windows, rates_g, dt, dirs)
+        fit_g = _fit_scaled(motions_g, w, scale, solver)
+        effects["g_sensitivity"] = {
+            "F": gs["F"],
+            "p": gs["p"],
+            "rest_spread_before": gs["spread_before"].tolist(),
+            "rest_spread_after": gs["spread_after"].tolist(),
+            "rms_after_without_deg": rms(after),
+            "rms_after_with_deg": rms(fit_g[4]),
+        }
+        notes.append(
+            f"g-sensitivity: the rest bias follows the acceleration (F = {gs['F']:.3g} over "
+            f"{gs['poses']} poses, p = {gs['p']:.2g}); b + G a takes the spread of the pose "
+            "means from "
+            + ", ".join(f"{v:.3g}" for v in gs["spread_before"])
+            + " to "
+            + ", ".join(f"{v:.3g}" for v in gs["spread_after"])
+            + f" {units}, and the miss between poses from {rms(after):.3g} to "
+            f"{rms(fit_g[4]):.3g} deg; G is applied during the turns"
+        )
+        C, cov, stderr, res, after = fit_g
+        bias = b_g
+        pose_means = pose_means - pose_acc @ G.T
+    elif g_sensitivity and np.isfinite(gs.get("F", np.nan)):
+        notes.append(
+            f"g-sensitivity tested and not found (F = {gs['F']:.3g} over {gs['poses']} poses, "
+            f"p = {gs['p']:.2g}): the rest bias does not follow the acceleration"
+        )
 
     # what the rest noise alone leaves, in the two directions gravity can see: white rate
     # noise integrated over each motion, and the noise of the two poses' mean directions
@@ -656,11 +815,10 @@ def calibrate_gyro(
         drift = np.degrees(np.sqrt(2.0) * np.linalg.norm(spread) / np.sqrt(3.0))
         drift *= float(np.median(durations))
         notes.append(
-            f"the calibrated rotations miss by {rms(after):.2g} deg, {rms(after) / rms(floor):.1f}"
-            f" x what the rest noise leaves; the bias moves between poses by "
-            f"{np.linalg.norm(spread) / np.sqrt(3.0):.2g} rad/s (std), which over the median "
-            f"turn of {np.median(durations):.2g} s is {drift:.2g} deg: bias drift, which this "
-            "model holds constant, is a candidate for the rest"
+            f"unexplained: the calibrated rotations miss by {rms(after):.2g} deg, "
+            f"{rms(after) / rms(floor):.1f} x what the rest noise leaves. The rest bias still "
+            f"moves between poses by {np.linalg.norm(spread) / np.sqrt(3.0):.2g} rad/s (std), "
+            f"{drift:.2g} deg over the median turn of {np.median(durations):.2g} s"
         )
     notes.append(
         f"{k} motions between {len(iv)} static poses integrated; bias from "
@@ -689,7 +847,10 @@ def calibrate_gyro(
         motion_errors_deg=after,
         rest_noise=noise,
         bias_spread=spread,
+        **_allan_fields(g, iv, bias, C, rate),
         sample_rate=rate,
+        g_sensitivity=G,
+        effects=effects,
         poorly_determined=poor,
         warnings=warn,
         notes=notes,

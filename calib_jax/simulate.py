@@ -678,11 +678,14 @@ def simulate_gyro_log(
     gyro_noise: float = 0.003,
     accel_noise: float = 0.002,
     axes: np.ndarray | None = None,
+    g_sensitivity: np.ndarray | None = None,
 ) -> SimulatedIMU:
     """Still poses of ``hold_s`` joined by turns of ``turn_s``: each turn is about a body axis
     (uniform on the sphere, or drawn from the rows of ``axes``) by 45-135 deg, with a smooth
     rate profile (zero at both ends). The attitude is composed exactly (SciPy), independently
     of calib_jax's integrator. Noise: per-sample standard deviations in rad/s and in g.
+    ``g_sensitivity`` G (raw gyro units per m/s^2) adds G f to the raw gyro, f the specific
+    force in m/s^2.
     """
     from scipy.spatial.transform import Rotation
 
@@ -715,5 +718,7 @@ def simulate_gyro_log(
     alpha, beta = alpha_beta(p)
     acc = f @ alpha.T + beta + rng.normal(0.0, accel_noise, f.shape)
     gyro = w @ np.linalg.inv(C).T + b + rng.normal(0.0, gyro_noise, w.shape) @ np.linalg.inv(C).T
+    if g_sensitivity is not None:
+        gyro = gyro + (f * 9.80665) @ np.asarray(g_sensitivity, float).T
     t = np.arange(len(f)) / sample_rate
     return SimulatedIMU(t, acc, gyro, w, p, C, b, pose, sample_rate)
