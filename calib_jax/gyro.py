@@ -390,7 +390,7 @@ def _saturated(g: np.ndarray, bias: np.ndarray, noise: np.ndarray) -> np.ndarray
     return bad
 
 
-def _gyro_still(g: np.ndarray, intervals: np.ndarray) -> np.ndarray:
+def gyro_still_intervals(g: np.ndarray, intervals: np.ndarray) -> np.ndarray:
     """The accelerometer's static intervals narrowed to where the gyro is still too.
 
     A turn that starts slowly about an axis near gravity barely moves the gravity direction,
@@ -696,7 +696,7 @@ def calibrate_gyro(
         )
 
     # rests: bias, noise and drift
-    iv = _gyro_still(g, iv)
+    iv = gyro_still_intervals(g, iv)
     rest = np.concatenate([g[s:e] for s, e in iv])
     bias = rest.mean(axis=0)
     pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
