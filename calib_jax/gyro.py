@@ -41,7 +41,13 @@ from .calibration import (
 )
 from .io.files import SensorLog
 from .lm import fit_status, lm_solve, status_message
-from .models.gyro import Motions, gravity_residual, to_imu_tk
+from .models.gyro import (
+    Motions,
+    asymmetric,
+    gravity_residual,
+    gravity_residual_asymmetric,
+    to_imu_tk,
+)
 from .padding import bucket
 from .runtime import disk_jit
 
@@ -108,6 +114,10 @@ class GyroCalibration(Record):
     g_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     """G (3 x 3), input units per m/s^2 of calibrated acceleration: w = C (raw - b - G a).
     Zero unless the protocol measured it (Ferraris: imucal's K_ga)."""
+    scale_asymmetry: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """s per axis: a reading x = raw - b - G a is taken as x (1 + s sign(x)) before C. s is
+    the correction: an axis whose positive turns read 1 % high (and negative ones 1 % low)
+    has s about -0.01. Zero unless the test in ``effects`` accepted it."""
     effects: dict = field(default_factory=dict)
     """Effects beyond the model that were tested and added, with the error without and with
     each (``g_sensitivity``: its F test, the rest spread and the miss before and after)."""
@@ -130,12 +140,15 @@ class GyroCalibration(Record):
         return is_usable(self.status)
 
     def apply(self, raw, acc=None) -> np.ndarray:
-        """Calibrated rates C (raw - b - G a), rad/s, for one reading (3,), many (N, 3) or a
-        loaded log's gyro columns; ``acc`` the calibrated acceleration (m/s^2) of the same
-        samples when G is not zero. Inside JAX use :func:`calib_jax.models.gyro.correct`."""
+        """Calibrated rates C x, x = raw - b - G a (times 1 + s sign(x) with scale asymmetry),
+        rad/s, for one reading (3,), many (N, 3) or a loaded log's gyro columns; ``acc`` the
+        calibrated acceleration (m/s^2) of the same samples when G is not zero. Inside JAX
+        use :func:`calib_jax.models.gyro.correct` (no G, no asymmetry)."""
         x = _raw_vectors(raw, "gyro") - self.bias
         if acc is not None:
             x = x - np.asarray(acc, float) @ self.g_sensitivity.T
+        if np.any(self.scale_asymmetry != 0):
+            x = x * (1.0 + self.scale_asymmetry * np.sign(x))
         return x @ self.matrix.T
 
     def imu_tk(self) -> tuple[np.ndarray, np.ndarray]:
@@ -227,6 +240,7 @@ class GyroCalibration(Record):
                     "model": "true = correction.matrix @ (raw - offset - matrix @ a), a in m/s^2",
                 },
                 "method": self.method,
+                "scale_asymmetry": np.asarray(self.scale_asymmetry).tolist(),
                 "effects": self.effects,
                 "stderr": {
                     "correction": np.asarray(self.stderr_matrix).tolist(),
@@ -304,6 +318,7 @@ class GyroCalibration(Record):
             allan_rest_s=r.num("allan.rest_s", finite=False),
             g_sensitivity=r.arr("g_sensitivity.matrix", (3, 3), default=np.zeros((3, 3))),
             method=r.text("method"),
+            scale_asymmetry=r.arr("scale_asymmetry", (3,), default=[0.0, 0.0, 0.0]),
             effects=_unsanitize(r.get("effects", {})),
             poorly_determined=r.strings("poorly_determined"),
             warnings=r.strings("warnings"),
@@ -343,10 +358,24 @@ def _fit(c0, motions: Motions, weights, update_type: int):
     )
 
 
+def _fit_asymmetric(p0, motions: Motions, weights, update_type: int):
+    return lm_solve(
+        gravity_residual_asymmetric,
+        p0,
+        motions,
+        weights=jnp.repeat(weights, 3),
+        update_type=update_type,
+        dof=2.0 * jnp.sum(weights) - p0.shape[0],
+    )
+
+
 @functools.lru_cache(maxsize=8)
 def _compiled(name: str, update_type: int = 1):
     if name == "fit":
         return disk_jit(functools.partial(_fit, update_type=update_type), f"gyro.fit {update_type}")
+    if name == "fit_asymmetric":
+        fun = functools.partial(_fit_asymmetric, update_type=update_type)
+        return disk_jit(fun, f"gyro.fit_asymmetric {update_type}")
     fun = {"angles": _angles, "scan": _scan_costs}[name]
     return disk_jit(fun, f"gyro.{name}")
 
@@ -541,6 +570,44 @@ def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
     return "counts", [f"gyro units: raw counts, {1 / scale:.5g} counts per rad/s"]
 
 
+def _test_asymmetry(motions: Motions, w: np.ndarray, scale: float, solver: str, res) -> dict:
+    """Refit with a scale asymmetry per axis (12 parameters) from the nine-parameter optimum
+    ``res``; an F test of the three on the LM chi2 (accepted at p < 1e-3)."""
+    from scipy.stats import f as f_dist
+
+    k = int(w.sum())
+    scaled = motions._replace(rates=motions.rates * scale)
+    p0 = jnp.concatenate([res.params, jnp.zeros(3, res.params.dtype)])
+    r12 = _compiled("fit_asymmetric", int(solver[-1]))(p0, scaled, jnp.asarray(w))
+    dof = 2 * k - 12
+    chi0, chi1 = float(res.chi2), float(r12.chi2)
+    F = ((chi0 - chi1) / 3.0) / (chi1 / dof) if chi1 > 0 and dof > 0 else float("nan")
+    p = float(f_dist.sf(F, 3, dof)) if np.isfinite(F) else float("nan")
+    c9 = np.asarray(r12.params[:9])
+    cov = np.asarray(r12.covariance)[:9, :9] * scale**2
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
+    angles_of = _compiled("angles")
+    corrected = scaled._replace(rates=asymmetric(scaled.rates, r12.params[9:]))
+    miss = np.degrees(np.asarray(angles_of(r12.params[:9], corrected))[:k])
+    return {
+        "effect": {
+            "accepted": bool(p < 1e-3) and bool(np.isfinite(F)),
+            "F": F,
+            "p": p,
+            "coefficients": np.asarray(r12.params[9:]).tolist(),
+            "stderr": np.asarray(r12.stderr[9:]).tolist(),
+        },
+        "fit": (
+            c9.reshape(3, 3) * scale,
+            np.asarray(r12.covariance)[:9, :9] * scale**2,
+            stderr,
+            r12,
+            miss,
+        ),
+        "miss": miss,
+    }
+
+
 def _allan_fields(g, intervals, bias, C, rate) -> dict:
     """The Allan noise terms of the longest rest, calibrated (rad/s)."""
     s, e = max(np.asarray(intervals).tolist(), key=lambda se: se[1] - se[0])
@@ -609,6 +676,7 @@ def calibrate_gyro(
     sensor_id: str | None = None,
     accel_options: dict | None = None,
     g_sensitivity: bool = True,
+    scale_asymmetry: bool = True,
 ) -> GyroCalibration:
     """Calibrate a gyroscope from a multi-position log with rotations between the poses.
 
@@ -638,6 +706,9 @@ def calibrate_gyro(
         Test whether the rest bias follows the acceleration (the pose means regressed on
         b + G a, an F test of G at p < 1e-3) and, when it does, remove b + G a during the
         turns and refit; the record's ``effects`` holds the test and the miss with and without.
+    scale_asymmetry : bool
+        Test whether turns read a different scale one way than the other (three more
+        parameters, an F test at p < 1e-3 on the fit's chi2); kept when accepted.
 
     Raises
     ------
@@ -754,6 +825,9 @@ def calibrate_gyro(
     gs = _g_sensitivity(pose_means, pose_acc) if g_sensitivity else {"accepted": False}
     G = np.zeros((3, 3))
     effects: dict = {}
+    current = motions
+    if g_sensitivity and np.isfinite(gs.get("F", np.nan)):
+        effects["g_sensitivity"] = {"accepted": gs["accepted"], "F": gs["F"], "p": gs["p"]}
     if gs["accepted"]:
         G, b_g = gs["G"], gs["bias"]
 
@@ -762,9 +836,7 @@ def calibrate_gyro(
 
         motions_g, _ = _pad_motions(windows, rates_g, dt, dirs)
         fit_g = _fit_scaled(motions_g, w, scale, solver)
-        effects["g_sensitivity"] = {
-            "F": gs["F"],
-            "p": gs["p"],
+        effects["g_sensitivity"] |= {
             "rest_spread_before": gs["spread_before"].tolist(),
             "rest_spread_after": gs["spread_after"].tolist(),
             "rms_after_without_deg": rms(after),
@@ -783,11 +855,30 @@ def calibrate_gyro(
         C, cov, stderr, res, after = fit_g
         bias = b_g
         pose_means = pose_means - pose_acc @ G.T
+        current = motions_g
     elif g_sensitivity and np.isfinite(gs.get("F", np.nan)):
         notes.append(
             f"g-sensitivity tested and not found (F = {gs['F']:.3g} over {gs['poses']} poses, "
             f"p = {gs['p']:.2g}): the rest bias does not follow the acceleration"
         )
+
+    asym = np.zeros(3)
+    if scale_asymmetry:
+        fit_a = _test_asymmetry(current, w, scale, solver, res)
+        effects["scale_asymmetry"] = fit_a["effect"] | {"rms_without_deg": rms(after)}
+        effects["scale_asymmetry"]["rms_with_deg"] = rms(fit_a["miss"])
+        verdict = "found" if fit_a["effect"]["accepted"] else "tested and not found"
+        notes.append(
+            f"scale asymmetry {verdict}: s = "
+            + ", ".join(f"{v:+.2g}" for v in fit_a["effect"]["coefficients"])
+            + " +- "
+            + ", ".join(f"{v:.2g}" for v in fit_a["effect"]["stderr"])
+            + f" (F = {fit_a['effect']['F']:.3g}, p = {fit_a['effect']['p']:.2g}); miss "
+            f"{rms(after):.3g} -> {rms(fit_a['miss']):.3g} deg"
+        )
+        if fit_a["effect"]["accepted"]:
+            C, cov, stderr, res, after = fit_a["fit"]
+            asym = np.asarray(fit_a["effect"]["coefficients"]) * np.sign(scale)
 
     # what the rest noise alone leaves, in the two directions gravity can see: white rate
     # noise integrated over each motion, and the noise of the two poses' mean directions
@@ -850,6 +941,7 @@ def calibrate_gyro(
         **_allan_fields(g, iv, bias, C, rate),
         sample_rate=rate,
         g_sensitivity=G,
+        scale_asymmetry=asym,
         effects=effects,
         poorly_determined=poor,
         warnings=warn,

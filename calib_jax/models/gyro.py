@@ -62,6 +62,23 @@ def gravity_residual(c9: ArrayLike, motions: Motions) -> jax.Array:
     return jax.vmap(one)(motions.rates, motions.dt, motions.before, motions.after).ravel()
 
 
+ASYMMETRY_SOFTNESS = 1e-3
+"""rad/s: the smooth sign tanh(w / this) of :func:`asymmetric` (differentiable at rest)."""
+
+
+def asymmetric(rates: ArrayLike, asym: ArrayLike) -> jax.Array:
+    """Rates read with a different scale one way than the other: w (1 + s sign(w)) per axis
+    (a smooth sign, so rest and the Jacobian stay well defined)."""
+    rates = jnp.asarray(rates)
+    return rates * (1.0 + asym * jnp.tanh(rates / ASYMMETRY_SOFTNESS))
+
+
+def gravity_residual_asymmetric(p12: ArrayLike, motions: Motions) -> jax.Array:
+    """:func:`gravity_residual` with scale asymmetry: ``p12`` is C row by row, then the three
+    asymmetries s of :func:`asymmetric` (applied to the de-biased rates before C)."""
+    return gravity_residual(p12[:9], motions._replace(rates=asymmetric(motions.rates, p12[9:])))
+
+
 def to_imu_tk(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(T, K) with C = T K: K the diagonal scale, T the misalignment with unit diagonal."""
     C = np.asarray(C, float)
