@@ -151,6 +151,18 @@ class GyroCalibration(Record):
             x = x * (1.0 + self.scale_asymmetry * np.sign(x))
         return x @ self.matrix.T
 
+    def to_params(self):
+        """The calibration as a JAX pytree, :class:`calib_jax.models.gyro.GyroParams`, with
+        the same ``apply``, for use inside jitted pipelines."""
+        from .models.gyro import GyroParams
+
+        return GyroParams(
+            matrix=jnp.asarray(self.matrix),
+            bias=jnp.asarray(self.bias),
+            g_sensitivity=jnp.asarray(self.g_sensitivity),
+            scale_asymmetry=jnp.asarray(self.scale_asymmetry),
+        )
+
     def imu_tk(self) -> tuple[np.ndarray, np.ndarray]:
         """imu_tk's (T, K): misalignment with unit diagonal and diagonal scale, C = T K."""
         return to_imu_tk(self.matrix)

@@ -4,6 +4,7 @@ imu_tk Xsens log, bad input, the record and the command line."""
 import dataclasses
 import json
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -290,3 +291,16 @@ def test_ferraris_reproduces_imucals_published_calibration(tmp_path):
     with pytest.raises(ValueError, match="missing: z_rot"):
         no_z = {k: v for k, v in sections.items() if k != "z_rot"}
         calibrate_gyro_ferraris(x[:, 1:4], x[:, 4:7], no_z, sample_rate=204.8)
+
+
+def test_to_params_applies_as_the_record_does(sim):
+    # the pytree for jitted pipelines: the same numbers as the record's numpy apply, inside
+    # jit, with G and s set (values made up: only the algebra is compared)
+    cal = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    cal = dataclasses.replace(
+        cal, g_sensitivity=np.full((3, 3), 1e-3), scale_asymmetry=np.array([0.01, 0.0, -0.02])
+    )
+    p = cal.to_params()
+    a = sim.acc[:50] * 9.80665
+    got = jax.jit(lambda p, r, a: p.apply(r, a))(p, jnp.asarray(sim.gyro[:50]), jnp.asarray(a))
+    np.testing.assert_allclose(got, cal.apply(sim.gyro[:50], acc=a), rtol=1e-12, atol=1e-15)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,6 +37,30 @@ class Motions(NamedTuple):
     dt: jax.Array
     before: jax.Array
     after: jax.Array
+
+
+class GyroParams(eqx.Module):
+    """One gyroscope's calibration as a JAX pytree: w = C x, x = raw - b - G a, times
+    1 + s sign(x) per axis (:func:`asymmetric`). G and s are zero unless the fit found them."""
+
+    matrix: jax.Array
+    """C (3 x 3), rad/s per raw unit."""
+    bias: jax.Array
+    """b (3,), raw units."""
+    g_sensitivity: jax.Array
+    """G (3 x 3), raw units per m/s^2."""
+    scale_asymmetry: jax.Array
+    """s (3,)."""
+
+    def apply(self, raw: ArrayLike, acc: ArrayLike | None = None) -> jax.Array:
+        """Calibrated rates (..., 3) in rad/s; ``acc`` the calibrated acceleration in m/s^2
+        of the same samples (needed when G is not zero). Jittable and differentiable; the
+        sign of the asymmetry is taken exactly here (the fit uses a smooth one)."""
+        x = jnp.asarray(raw) - self.bias
+        if acc is not None:
+            x = x - jnp.asarray(acc) @ self.g_sensitivity.T
+        x = x * (1.0 + self.scale_asymmetry * jnp.sign(x))
+        return x @ self.matrix.T
 
 
 def correct(c9: ArrayLike, bias: ArrayLike, raw: ArrayLike) -> jax.Array:
