@@ -34,6 +34,7 @@ from .calibration import (
     _sanitize,
     _unsanitize,
 )
+from .gyro import GyroCalibration, calibrate_gyro
 from .mag import calibrate_mag
 from .models import layout
 from .status import is_usable, worst_status
@@ -194,6 +195,10 @@ class MARGRecord(Record):
     acc_plane: PlaneAlignment | None = None
     """Paper 2's sensor-plane alignment of the accelerometer (from a turn log), or None."""
     mag_plane: PlaneAlignment | None = None
+    gyro: GyroCalibration | None = None
+    """The gyroscope, when the log has gyro columns and static poses with turns between them
+    (:func:`calib_jax.calibrate_gyro`, in the accelerometer's frame); else None and a warning
+    says why."""
     format_version: int = MARG_FORMAT_VERSION
 
     @property
@@ -293,6 +298,8 @@ class MARGRecord(Record):
         if self.accel is not None:
             out.append(self.accel.report())
         out += ["", "magnetometer:", self.mag.report(), "", self.alignment_text()]
+        if self.gyro is not None:
+            out += ["", "gyroscope:", self.gyro.report()]
         out.append(f"status: {self.status}")
         out += [f"warning: {w}" for w in self.warnings]
         return "\n".join(out)
@@ -325,6 +332,7 @@ class MARGRecord(Record):
                     name: None if pa is None else pa.to_dict()
                     for name, pa in (("accel", self.acc_plane), ("mag", self.mag_plane))
                 },
+                "gyro": None if self.gyro is None else self.gyro.to_dict(),
                 "warnings": list(self.warnings),
             }
         )
@@ -373,6 +381,7 @@ class MARGRecord(Record):
             date=d.get("date", ""),
             acc_plane=planes["accel"],
             mag_plane=planes["mag"],
+            gyro=None if d.get("gyro") is None else GyroCalibration.from_dict(d["gyro"], source),
         )
 
 
@@ -480,7 +489,31 @@ def calibrate_marg_log(
             f"{exc}. The magnetometer's ellipsoid fit is '{mcal.status}' too: {why}"
         ) from exc
     warn += [f"alignment: {w}" for w in al.warnings]
-    return _record(acal, method, mcal, al, warn, source=log.path)
+    gyro = _gyro_block(log, acal, method, warn)
+    rec = _record(acal, method, mcal, al, warn, source=log.path)
+    if gyro is None:
+        return rec
+    return dataclasses.replace(rec, gyro=gyro, status=worst_status(rec.status, gyro.status))
+
+
+def _gyro_block(log, acal, method: str, warn: list[str]) -> GyroCalibration | None:
+    """The gyroscope of a MARG log, or None with a warning saying why (appended to warn)."""
+    if log.gyro is None:
+        return None
+    if method != "static":
+        warn.append(
+            "gyroscope: not calibrated: the gyro fit integrates the turns between static poses "
+            "and this log has too few of them; record a pose log with turns between the poses "
+            "(calib-jax gyro)"
+        )
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitStatusWarning)
+            return calibrate_gyro(log, accel=acal)
+    except ValueError as exc:
+        warn.append(f"gyroscope: not calibrated: {exc}")
+        return None
 
 
 def _record(

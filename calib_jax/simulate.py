@@ -643,6 +643,8 @@ class SimulatedIMU:
     """Raw gyro, C^-1 w + b + noise, w the body rate in rad/s (N, 3)."""
     rate_true: np.ndarray
     """w, rad/s (N, 3)."""
+    mag: np.ndarray
+    """The field in the sensor frame (calibrated, 45 uT, dip 65 deg, 0.2 uT noise) (N, 3)."""
     accel_params: np.ndarray
     gyro_matrix: np.ndarray
     """C, rad/s per raw unit: w = C (raw - b)."""
@@ -695,10 +697,12 @@ def simulate_gyro_log(
     p = random_params(rng) if accel_params is None else np.asarray(accel_params, float)
     hold, turn = int(round(hold_s * sample_rate)), int(round(turn_s * sample_rate))
     att = Rotation.random(random_state=rng)  # body -> nav
-    f, w, pose = [], [], []
+    field = 45.0 * np.array([0.0, np.cos(np.deg2rad(65.0)), -np.sin(np.deg2rad(65.0))])
+    f, w, pose, m = [], [], [], []
     for i in range(n_poses):
         n_hold = hold * (3 if i == 0 else 1)
         f.append(np.repeat(att.inv().apply([0.0, 0.0, 1.0])[None], n_hold, axis=0))
+        m.append(np.repeat(att.inv().apply(field)[None], n_hold, axis=0))
         w.append(np.zeros((n_hold, 3)))
         pose.append(np.full(n_hold, i))
         if i + 1 == n_poses:
@@ -711,14 +715,17 @@ def simulate_gyro_log(
         rate = angle / (turn / sample_rate) * (1 - np.cos(2 * np.pi * u))
         turned = att * Rotation.from_rotvec(theta[:, None] * axis[None, :])
         f.append(turned.inv().apply([0.0, 0.0, 1.0]))
+        m.append(turned.inv().apply(field))
         w.append(rate[:, None] * axis[None, :])
         pose.append(np.full(turn, -1))
         att = att * Rotation.from_rotvec(angle * axis)
     f, w, pose = np.concatenate(f), np.concatenate(w), np.concatenate(pose)
+    mag = np.concatenate(m)
     alpha, beta = alpha_beta(p)
     acc = f @ alpha.T + beta + rng.normal(0.0, accel_noise, f.shape)
     gyro = w @ np.linalg.inv(C).T + b + rng.normal(0.0, gyro_noise, w.shape) @ np.linalg.inv(C).T
     if g_sensitivity is not None:
         gyro = gyro + (f * 9.80665) @ np.asarray(g_sensitivity, float).T
     t = np.arange(len(f)) / sample_rate
-    return SimulatedIMU(t, acc, gyro, w, p, C, b, pose, sample_rate)
+    mag = mag + rng.normal(0.0, 0.2, mag.shape)
+    return SimulatedIMU(t, acc, gyro, w, mag, p, C, b, pose, sample_rate)

@@ -304,3 +304,25 @@ def test_to_params_applies_as_the_record_does(sim):
     a = sim.acc[:50] * 9.80665
     got = jax.jit(lambda p, r, a: p.apply(r, a))(p, jnp.asarray(sim.gyro[:50]), jnp.asarray(a))
     np.testing.assert_allclose(got, cal.apply(sim.gyro[:50], acc=a), rtol=1e-12, atol=1e-15)
+
+
+def test_marg_gains_the_gyro_block_and_says_why_when_it_cannot(tmp_path):
+    # a pose log with accelerometer, gyro and magnetometer: calib-jax marg's record holds the
+    # gyro fit (saved and read back); a log of the same board without rests says why not
+    from calib_jax.io.files import SensorLog
+    from calib_jax.marg import MARGRecord, calibrate_marg_log
+
+    sim = simulate_gyro_log(8, n_poses=16)
+    log = SensorLog(acc=sim.acc, gyro=sim.gyro, mag=sim.mag, t=sim.t, sample_rate=100.0)
+    rec = calibrate_marg_log(log)
+    assert rec.accel_method == "static" and rec.gyro is not None and rec.gyro.success
+    z = (rec.gyro.matrix - sim.gyro_matrix) / rec.gyro.stderr_matrix
+    assert np.abs(z).max() < 4.0
+    assert "gyroscope:" in rec.report()
+    rec.save(tmp_path / "m.json")
+    assert MARGRecord.load(tmp_path / "m.json") == rec
+    moving = sim.pose < 0
+    tumble = SensorLog(acc=sim.acc[moving], gyro=sim.gyro[moving], mag=sim.mag[moving], t=None)
+    rec = calibrate_marg_log(tumble, accel="ellipsoid")
+    assert rec.gyro is None
+    assert any(w.startswith("gyroscope: not calibrated") for w in rec.warnings)
