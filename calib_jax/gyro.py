@@ -402,6 +402,12 @@ def _time_steps(t, sample_rate, n: int) -> tuple[np.ndarray, float]:
     if t is not None:
         t = np.asarray(t, float)
         dt = np.diff(t)
+        if not np.isfinite(t).any():
+            raise ValueError(
+                f"the column read as time holds no numbers ({len(t)} cells are text or empty): "
+                "map the columns with --columns, _ for the one to skip (e.g. _,ax,ay,az,gx,gy,gz"
+                ",...), and give the sample rate, --sample-rate"
+            )
         if len(t) != n or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
             bad = int(np.sum(~(dt > 0)))
             raise ValueError(
@@ -767,11 +773,20 @@ def calibrate_gyro(
             f"the accelerometer has {len(acc)} samples and the gyro {len(g)}: they must share "
             "one clock, sample for sample (resample one onto the other's times first)"
         )
-    if not np.all(np.isfinite(g)):
-        raise ValueError(
-            f"{int(np.sum(~np.isfinite(g).all(axis=1)))} gyro rows hold NaN or inf: the rates "
-            "are integrated sample by sample, so fill or cut those rows first"
+    rows = np.isfinite(g).all(axis=1) & np.isfinite(acc).all(axis=1)
+    if not rows.all():
+        if t is None or not np.isfinite(np.asarray(t, float)[rows]).all():
+            raise ValueError(
+                f"{int((~rows).sum())} rows hold NaN or inf in the accelerometer or gyro: the "
+                "rates are integrated sample by sample, so without a time column those rows "
+                "cannot be skipped; fill or cut them first"
+            )
+        # with a time column a row without readings is a gap the time steps span
+        notes.append(
+            f"{int((~rows).sum())} rows without a finite accelerometer and gyro reading left "
+            "out (the time column spans them)"
         )
+        acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
     if solver not in ("lm1", "lm2", "lm3"):
         raise ValueError(f"solver must be lm1, lm2 or lm3, got {solver!r}")
     dt, rate = _time_steps(t, sample_rate, len(g))

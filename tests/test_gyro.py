@@ -254,6 +254,23 @@ def test_clock_and_length_problems(sim):
         calibrate_gyro(sim.acc, sim.gyro, t=t)
 
 
+def test_rows_without_readings_are_spanned_by_the_time_column(sim):
+    # a sparse log (another sensor's rows interleaved, as the AirBrakes MicroStrain CSV): with
+    # a time column the empty rows are gaps the steps span, and the fit equals the clean one
+    acc = np.insert(sim.acc, np.arange(5, len(sim.t), 7), np.nan, axis=0)
+    gyr = np.insert(sim.gyro, np.arange(5, len(sim.t), 7), np.nan, axis=0)
+    t = np.insert(sim.t, np.arange(5, len(sim.t), 7), sim.t[np.arange(5, len(sim.t), 7)] - 1e-4)
+    cal = calibrate_gyro(acc, gyr, t=t)
+    ref = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    np.testing.assert_allclose(cal.matrix, ref.matrix, rtol=1e-9)
+    said = "rows without a finite accelerometer and gyro reading left out"
+    assert any(said in n for n in cal.notes)
+    with pytest.raises(ValueError, match="without a time column those rows"):
+        calibrate_gyro(acc, gyr, sample_rate=100.0)
+    with pytest.raises(ValueError, match="column read as time holds no numbers"):
+        calibrate_gyro(sim.acc, sim.gyro, t=np.full(len(sim.t), np.nan))
+
+
 def test_saturated_turns_are_left_out_with_a_warning(sim):
     g = sim.gyro.copy()
     top = np.percentile(g[:, 0], 99.9)
