@@ -865,7 +865,9 @@ def calibrate_gyro(
         rms_raw = rms(np.degrees(np.asarray(raw_angles)[:k]))
 
     # close the loop on the rests: a bias that follows the acceleration is g-sensitivity
-    to_ms2 = 9.80665 if accel.output_units == "g" else 1.0
+    # G is per m/s^2: an output in other units (g, or counts fitted to a reference g) is
+    # scaled so that gravity reads standard gravity
+    to_ms2 = 1.0 if accel.output_units == "m/s^2" else 9.80665 / accel.g
     pose_acc = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv])) * to_ms2
     gs = _g_sensitivity(pose_means, pose_acc) if g_sensitivity else {"accepted": False}
     G = np.zeros((3, 3))
@@ -884,8 +886,8 @@ def calibrate_gyro(
         effects["g_sensitivity"] |= {
             "rest_spread_before": gs["spread_before"].tolist(),
             "rest_spread_after": gs["spread_after"].tolist(),
-            "rms_after_without_deg": rms(after),
-            "rms_after_with_deg": rms(fit_g[4]),
+            "rms_without_deg": rms(after),
+            "rms_with_deg": rms(fit_g[4]),
         }
         notes.append(
             f"g-sensitivity: the rest bias follows the acceleration (F = {gs['F']:.3g} over "
