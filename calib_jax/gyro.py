@@ -425,15 +425,15 @@ def _time_steps(t, sample_rate, n: int) -> tuple[np.ndarray, float]:
 
 
 def _saturated(g: np.ndarray, bias: np.ndarray, noise: np.ndarray) -> np.ndarray:
-    """(N,) True where an axis sits at its log-wide extreme, far from rest, in 3 or more
+    """(N, 3) True where an axis sits at its log-wide extreme, far from rest, in 3 or more
     samples: the reading clipped at the gyro's range."""
-    bad = np.zeros(len(g), bool)
+    bad = np.zeros(g.shape, bool)
     for ax in range(3):
         col = g[:, ax]
         for ext in (col.max(), col.min()):
             hit = col == ext
             if hit.sum() >= 3 and abs(ext - bias[ax]) > 50 * max(noise[ax], 1e-12):
-                bad |= hit
+                bad[:, ax] |= hit
     return bad
 
 
@@ -834,9 +834,9 @@ def calibrate_gyro(
     clipped = _saturated(g, bias, noise_raw)
     sat = [(i, s, e) for i, s, e in windows if clipped[s:e].any()]
     if sat:
-        axes = sorted({"xyz"[a] for a in range(3) for _, s, e in sat if clipped[s:e].any()})
+        axes = [ax for a, ax in enumerate("xyz") if any(clipped[s:e, a].any() for _, s, e in sat)]
         warn.append(
-            f"the gyro reads its extreme value in {int(clipped.sum())} samples during "
+            f"the gyro reads its extreme value in {int(clipped.any(axis=1).sum())} samples during "
             f"{len(sat)} motions (axes {', '.join(axes)}): those motions were left out; turn "
             "more slowly or choose a larger gyro range"
         )
