@@ -357,22 +357,12 @@ def _scan_costs(scales, motions: Motions, weights) -> jax.Array:
     return jax.vmap(lambda s: jnp.sum(weights * _angles(s * eye, motions) ** 2))(scales)
 
 
-def _fit(c0, motions: Motions, weights, update_type: int):
-    # a miss between unit vectors has no component along gravity to first order: each
-    # motion gives two independent residuals, not three
+def _fit(p0, motions: Motions, weights, update_type: int, asymmetric: bool = False):
+    """LM on the gravity residual (C, nine entries) or, with ``asymmetric``, on C and the
+    three scale asymmetries. A miss between unit vectors has no component along gravity to
+    first order: each motion gives two independent residuals, not three."""
     return lm_solve(
-        gravity_residual,
-        c0,
-        motions,
-        weights=jnp.repeat(weights, 3),
-        update_type=update_type,
-        dof=2.0 * jnp.sum(weights) - c0.shape[0],
-    )
-
-
-def _fit_asymmetric(p0, motions: Motions, weights, update_type: int):
-    return lm_solve(
-        gravity_residual_asymmetric,
+        gravity_residual_asymmetric if asymmetric else gravity_residual,
         p0,
         motions,
         weights=jnp.repeat(weights, 3),
@@ -386,7 +376,7 @@ def _compiled(name: str, update_type: int = 1):
     if name == "fit":
         return disk_jit(functools.partial(_fit, update_type=update_type), f"gyro.fit {update_type}")
     if name == "fit_asymmetric":
-        fun = functools.partial(_fit_asymmetric, update_type=update_type)
+        fun = functools.partial(_fit, update_type=update_type, asymmetric=True)
         return disk_jit(fun, f"gyro.fit_asymmetric {update_type}")
     fun = {"angles": _angles, "scan": _scan_costs}[name]
     return disk_jit(fun, f"gyro.{name}")
