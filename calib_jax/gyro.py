@@ -143,7 +143,7 @@ class GyroCalibration(Record):
         """Calibrated rates C x, x = raw - b - G a (times 1 + s sign(x) with scale asymmetry),
         rad/s, for one reading (3,), many (N, 3) or a loaded log's gyro columns; ``acc`` the
         calibrated acceleration (m/s^2) of the same samples when G is not zero. Inside JAX
-        use :func:`calib_jax.models.gyro.correct` (no G, no asymmetry)."""
+        use :meth:`to_params` (:class:`calib_jax.models.gyro.GyroParams`)."""
         x = _raw_vectors(raw, "gyro") - self.bias
         if acc is not None:
             x = x - np.asarray(acc, float) @ self.g_sensitivity.T
@@ -471,26 +471,32 @@ def _pad_motions(windows, rates_of, dt, dirs) -> tuple[Motions, np.ndarray]:
     return Motions(*(jnp.asarray(a) for a in (rates, steps, before, after))), w
 
 
+def _nested_f_test(rss0: float, rss1: float, extra: int, dof: int) -> tuple[float, float]:
+    """(F, p) of ``extra`` added parameters from residual sums rss0 -> rss1, with ``dof``
+    degrees of freedom left in the larger model; NaN when the test is not defined."""
+    from scipy.stats import f as f_dist
+
+    if dof < 3 or not rss1 > 0:
+        return float("nan"), float("nan")
+    F = ((rss0 - rss1) / extra) / (rss1 / dof)
+    return float(F), float(f_dist.sf(F, extra, dof))
+
+
 def _g_sensitivity(pose_means: np.ndarray, pose_acc: np.ndarray) -> dict:
     """Does the rest bias follow the acceleration? The pose means regressed on b + G a (a in
     m/s^2), against a constant b: an F test of the nine entries of G (accepted at p < 1e-3),
     and the spread of the pose means about each model."""
-    from scipy.stats import f as f_dist
-
     n = len(pose_means)
     X = np.column_stack([np.ones(n), pose_acc])
     coef = np.linalg.lstsq(X, pose_means, rcond=None)[0]
     rss0 = float(np.sum((pose_means - pose_means.mean(axis=0)) ** 2))
     resid = pose_means - X @ coef
-    rss1 = float(np.sum(resid**2))
-    dof = 3 * n - 12
-    if dof < 3 or rss1 <= 0:
-        return {"accepted": False, "F": float("nan"), "p": float("nan"), "poses": n}
-    F = ((rss0 - rss1) / 9.0) / (rss1 / dof)
-    p = float(f_dist.sf(F, 9, dof))
+    F, p = _nested_f_test(rss0, float(np.sum(resid**2)), 9, 3 * n - 12)
+    if not np.isfinite(F):
+        return {"accepted": False, "F": F, "p": p, "poses": n}
     return {
         "accepted": bool(p < 1e-3),
-        "F": float(F),
+        "F": F,
         "p": p,
         "poses": n,
         "bias": coef[0],
@@ -506,12 +512,18 @@ def _fit_scaled(motions: Motions, w: np.ndarray, scale: float, solver: str):
     k = int(w.sum())
     motions = motions._replace(rates=motions.rates * scale)
     res = _compiled("fit", int(solver[-1]))(jnp.eye(3).ravel(), motions, jnp.asarray(w))
-    C = np.asarray(res.params).reshape(3, 3) * scale
-    cov = np.asarray(res.covariance) * scale**2
-    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
-    stderr = np.where(np.isfinite(np.asarray(res.stderr).reshape(3, 3)), stderr, np.inf)
     miss = np.degrees(np.asarray(_compiled("angles")(res.params, motions))[:k])
-    return C, cov, stderr, res, miss
+    return (*_unscaled(res, scale), res, miss)
+
+
+def _unscaled(res, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(C, its covariance, its standard errors; inf where the solver found none) back in raw
+    units from a fit in units of the start scale; C's nine entries lead ``res.params``."""
+    C = np.asarray(res.params[:9]).reshape(3, 3) * scale
+    cov = np.asarray(res.covariance)[:9, :9] * scale**2
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
+    stderr = np.where(np.isfinite(np.asarray(res.stderr[:9]).reshape(3, 3)), stderr, np.inf)
+    return C, cov, stderr
 
 
 def _check_turn_axes(g: np.ndarray) -> None:
@@ -599,19 +611,11 @@ def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
 def _test_asymmetry(motions: Motions, w: np.ndarray, scale: float, solver: str, res) -> dict:
     """Refit with a scale asymmetry per axis (12 parameters) from the nine-parameter optimum
     ``res``; an F test of the three on the LM chi2 (accepted at p < 1e-3)."""
-    from scipy.stats import f as f_dist
-
     k = int(w.sum())
     scaled = motions._replace(rates=motions.rates * scale)
     p0 = jnp.concatenate([res.params, jnp.zeros(3, res.params.dtype)])
     r12 = _compiled("fit_asymmetric", int(solver[-1]))(p0, scaled, jnp.asarray(w))
-    dof = 2 * k - 12
-    chi0, chi1 = float(res.chi2), float(r12.chi2)
-    F = ((chi0 - chi1) / 3.0) / (chi1 / dof) if chi1 > 0 and dof > 0 else float("nan")
-    p = float(f_dist.sf(F, 3, dof)) if np.isfinite(F) else float("nan")
-    c9 = np.asarray(r12.params[:9])
-    cov = np.asarray(r12.covariance)[:9, :9] * scale**2
-    stderr = np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(3, 3)
+    F, p = _nested_f_test(float(res.chi2), float(r12.chi2), 3, 2 * k - 12)
     angles_of = _compiled("angles")
     corrected = scaled._replace(rates=asymmetric(scaled.rates, r12.params[9:]))
     miss = np.degrees(np.asarray(angles_of(r12.params[:9], corrected))[:k])
@@ -623,13 +627,7 @@ def _test_asymmetry(motions: Motions, w: np.ndarray, scale: float, solver: str, 
             "coefficients": np.asarray(r12.params[9:]).tolist(),
             "stderr": np.asarray(r12.stderr[9:]).tolist(),
         },
-        "fit": (
-            c9.reshape(3, 3) * scale,
-            np.asarray(r12.covariance)[:9, :9] * scale**2,
-            stderr,
-            r12,
-            miss,
-        ),
+        "fit": (*_unscaled(r12, scale), r12, miss),
         "miss": miss,
     }
 
@@ -809,8 +807,8 @@ def calibrate_gyro(
     noise_raw = np.sqrt(
         sum(((g[s:e] - g[s:e].mean(0)) ** 2).sum(0) for s, e in iv) / max(len(rest) - len(iv), 1)
     )
-    dirs = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv]))
-    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    pose_out = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv]))  # output units
+    dirs = pose_out / np.linalg.norm(pose_out, axis=1, keepdims=True)
 
     # motions between consecutive poses
     warn: list[str] = []
@@ -858,7 +856,7 @@ def calibrate_gyro(
     # G is per m/s^2: an output in other units (g, or counts fitted to a reference g) is
     # scaled so that gravity reads standard gravity
     to_ms2 = 1.0 if accel.output_units == "m/s^2" else 9.80665 / accel.g
-    pose_acc = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv])) * to_ms2
+    pose_acc = pose_out * to_ms2
     gs = _g_sensitivity(pose_means, pose_acc) if g_sensitivity else {"accepted": False}
     G = np.zeros((3, 3))
     effects: dict = {}

@@ -63,11 +63,6 @@ class GyroParams(eqx.Module):
         return x @ self.matrix.T
 
 
-def correct(c9: ArrayLike, bias: ArrayLike, raw: ArrayLike) -> jax.Array:
-    """Calibrated rates C (raw - b) for raw readings (..., 3); C is ``c9`` row by row."""
-    return (jnp.asarray(raw) - bias) @ jnp.reshape(c9, (3, 3)).T
-
-
 def motion_rotation(c9: ArrayLike, rates: ArrayLike, dt: ArrayLike) -> jax.Array:
     """The rotation matrix R of one motion, v_before = R v_after, from de-biased raw rates."""
     return quat_to_dcm(integrate_rates(jnp.asarray(rates) @ jnp.reshape(c9, (3, 3)).T, dt))
