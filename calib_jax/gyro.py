@@ -378,7 +378,7 @@ def _compiled(name: str, update_type: int = 1):
     if name == "fit_asymmetric":
         fun = functools.partial(_fit, update_type=update_type, asymmetric=True)
         return disk_jit(fun, f"gyro.fit_asymmetric {update_type}")
-    fun = {"angles": _angles, "scan": _scan_costs}[name]
+    fun = {"angles": _angles, "start": start_scale}[name]
     return disk_jit(fun, f"gyro.{name}")
 
 
@@ -575,16 +575,15 @@ def _coarse(motions: Motions, block: int = SCAN_BLOCK) -> Motions:
     return motions._replace(rates=rates, dt=steps)
 
 
-def _start_scale(motions: Motions, w: np.ndarray) -> float:
+def start_scale(motions: Motions, weights: jax.Array) -> jax.Array:
     """The common scale s (rad/s per unit) with the smallest miss for C = s I: a log scan of
-    1e-7 to 100 either sign, then a fine one around the best, on merged steps."""
-    scan = _compiled("scan")
+    1e-7 to 100 either sign, then a fine one around the best, on merged steps. Pure and
+    jittable (the pipeline's start); the fit needs no unit or initial guess."""
     motions = _coarse(motions)
-    cost = np.asarray(scan(jnp.asarray(_SCAN), motions, jnp.asarray(w)))
-    s0 = _SCAN[int(np.nanargmin(cost))]
-    fine = s0 * np.exp(np.linspace(-0.25, 0.25, len(_SCAN)))
-    cost = np.asarray(scan(jnp.asarray(fine), motions, jnp.asarray(w)))
-    return float(fine[int(np.nanargmin(cost))])
+    scan = jnp.asarray(_SCAN, motions.rates.dtype)
+    s0 = scan[jnp.nanargmin(_scan_costs(scan, motions, weights))]
+    fine = s0 * jnp.exp(jnp.linspace(-0.25, 0.25, len(_SCAN), dtype=scan.dtype))
+    return fine[jnp.nanargmin(_scan_costs(fine, motions, weights))]
 
 
 def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
@@ -688,6 +687,139 @@ def allan_noise(x: np.ndarray, sample_rate: float) -> tuple[np.ndarray, np.ndarr
     return arw, sig.min(axis=0) / 0.664
 
 
+@dataclass
+class _PoseLog:
+    """A gyro log cut into rests and motions (host side): what :func:`calibrate_gyro` and
+    :func:`calib_jax.pipeline.gyro_inputs` both fit."""
+
+    acc: np.ndarray
+    g: np.ndarray
+    dt: np.ndarray
+    rate: float
+    accel: AccelCalibration
+    intervals: np.ndarray
+    """(P, 2) still sample ranges of the poses."""
+    windows: list
+    """(pose i, first, stop) of each usable motion."""
+    dirs: np.ndarray
+    """(P, 3) unit gravity directions of the poses, from the calibrated accelerometer."""
+    pose_out: np.ndarray
+    notes: list
+    warn: list
+    source: object
+
+    @property
+    def rest(self) -> np.ndarray:
+        return np.concatenate([self.g[s:e] for s, e in self.intervals])
+
+    @property
+    def bias(self) -> np.ndarray:
+        return self.rest.mean(axis=0)
+
+
+def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
+    """Check the log, calibrate its accelerometer if not given, find the rests and the usable
+    motions between them; a ValueError saying what to change where that fails."""
+    from .accel import calibrate_accel
+
+    notes: list[str] = []
+    source = None
+    if isinstance(data, SensorLog):
+        acc, g = data.vectors("accel"), data.vectors("gyro")
+        t, sample_rate = data.t, sample_rate or data.sample_rate
+        notes += list(data.notes)
+        source = data.path
+    else:
+        if gyro is None:
+            raise ValueError("give the gyro readings: calibrate_gyro(acc, gyro, ...)")
+        acc, g = np.asarray(data, float), np.asarray(gyro, float)
+    if g.ndim != 2 or g.shape[1] != 3:
+        raise ValueError(f"gyro data must be (samples, 3), got shape {g.shape}")
+    if len(acc) != len(g):
+        raise ValueError(
+            f"the accelerometer has {len(acc)} samples and the gyro {len(g)}: they must share "
+            "one clock, sample for sample (resample one onto the other's times first)"
+        )
+    rows = np.isfinite(g).all(axis=1) & np.isfinite(acc).all(axis=1)
+    if not rows.all():
+        if t is None or not np.isfinite(np.asarray(t, float)[rows]).all():
+            raise ValueError(
+                f"{int((~rows).sum())} rows hold NaN or inf in the accelerometer or gyro: the "
+                "rates are integrated sample by sample, so without a time column those rows "
+                "cannot be skipped; fill or cut them first"
+            )
+        # with a time column a row without readings is a gap the time steps span
+        notes.append(
+            f"{int((~rows).sum())} rows without a finite accelerometer and gyro reading left "
+            "out (the time column spans them)"
+        )
+        acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
+    dt, rate = _time_steps(t, sample_rate, len(g))
+    _check_turn_axes(g)
+    if accel is None:
+        accel = calibrate_accel(acc, sample_rate=rate, **(accel_options or {}))
+        notes.append(
+            f"accelerometer calibrated first: {accel.n_intervals} static poses, status "
+            f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
+        )
+    if not accel.success:
+        raise ValueError(
+            f"the accelerometer calibration is {accel.status} ({accel.solver_message}): the "
+            "gravity directions the gyro is fitted to would be wrong; fix the accelerometer "
+            "fit first (calib-jax accel)"
+        )
+    iv = np.asarray(accel.static_intervals, int).reshape(-1, 2)
+    if len(iv) == 0 or iv[-1, 1] > len(g):
+        raise ValueError(
+            "the accelerometer calibration holds no static intervals of this log (it was "
+            "fitted to other data, or loaded from a file written before they were kept): "
+            "leave accel= out to fit it here"
+        )
+
+    # rests: bias and noise (for the clipping test)
+    iv = gyro_still_intervals(g, iv)
+    rest = np.concatenate([g[s:e] for s, e in iv])
+    bias = rest.mean(axis=0)
+    noise_raw = _rest_noise(g, iv)
+    pose_out = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv]))  # output units
+    dirs = pose_out / np.linalg.norm(pose_out, axis=1, keepdims=True)
+
+    # motions between consecutive poses
+    warn: list[str] = []
+    windows = _motion_windows(iv)
+    too_long = [(i, s, e) for i, s, e in windows if (e - s) / rate > MAX_MOTION_S]
+    if too_long:
+        notes.append(
+            f"{len(too_long)} motions longer than {MAX_MOTION_S:g} s left out (a pose the "
+            "detector missed, or a pause in motion; its gyro drift would dominate)"
+        )
+    clipped = _saturated(g, bias, noise_raw)
+    sat = [(i, s, e) for i, s, e in windows if clipped[s:e].any()]
+    if sat:
+        axes = [ax for a, ax in enumerate("xyz") if any(clipped[s:e, a].any() for _, s, e in sat)]
+        warn.append(
+            f"the gyro reads its extreme value in {int(clipped.any(axis=1).sum())} samples during "
+            f"{len(sat)} motions (axes {', '.join(axes)}): those motions were left out; turn "
+            "more slowly or choose a larger gyro range"
+        )
+    windows = [w for w in windows if w not in too_long and w not in sat]
+    if len(windows) < MIN_MOTIONS:
+        raise ValueError(
+            f"{len(windows)} usable motions between {len(iv)} static poses: the gyro fit needs "
+            f"at least {MIN_MOTIONS} rotations from one still pose to the next, about all "
+            "three axes; record more poses with turns between them"
+        )
+
+    return _PoseLog(acc, g, dt, rate, accel, iv, windows, dirs, pose_out, notes, warn, source)
+
+
+def _rest_noise(g: np.ndarray, intervals) -> np.ndarray:
+    """Per-axis white noise of the readings at rest (raw units), about each pose's mean."""
+    n = sum(e - s for s, e in intervals)
+    sq = sum(((g[s:e] - g[s:e].mean(0)) ** 2).sum(0) for s, e in intervals)
+    return np.sqrt(sq / max(n - len(intervals), 1))
+
+
 def calibrate_gyro(
     data: SensorLog | np.ndarray,
     gyro: np.ndarray | None = None,
@@ -741,104 +873,17 @@ def calibrate_gyro(
         ``MIN_MOTIONS`` usable motions, rotations about fewer than three axes, contradictory
         units, or an accelerometer calibration that is not usable.
     """
-    from .accel import calibrate_accel
-
-    notes: list[str] = []
-    source = None
-    if isinstance(data, SensorLog):
-        acc, g = data.vectors("accel"), data.vectors("gyro")
-        t, sample_rate = data.t, sample_rate or data.sample_rate
-        notes += list(data.notes)
-        source = data.path
-    else:
-        if gyro is None:
-            raise ValueError("give the gyro readings: calibrate_gyro(acc, gyro, ...)")
-        acc, g = np.asarray(data, float), np.asarray(gyro, float)
-    if g.ndim != 2 or g.shape[1] != 3:
-        raise ValueError(f"gyro data must be (samples, 3), got shape {g.shape}")
-    if len(acc) != len(g):
-        raise ValueError(
-            f"the accelerometer has {len(acc)} samples and the gyro {len(g)}: they must share "
-            "one clock, sample for sample (resample one onto the other's times first)"
-        )
-    rows = np.isfinite(g).all(axis=1) & np.isfinite(acc).all(axis=1)
-    if not rows.all():
-        if t is None or not np.isfinite(np.asarray(t, float)[rows]).all():
-            raise ValueError(
-                f"{int((~rows).sum())} rows hold NaN or inf in the accelerometer or gyro: the "
-                "rates are integrated sample by sample, so without a time column those rows "
-                "cannot be skipped; fill or cut them first"
-            )
-        # with a time column a row without readings is a gap the time steps span
-        notes.append(
-            f"{int((~rows).sum())} rows without a finite accelerometer and gyro reading left "
-            "out (the time column spans them)"
-        )
-        acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
     if solver not in ("lm1", "lm2", "lm3"):
         raise ValueError(f"solver must be lm1, lm2 or lm3, got {solver!r}")
-    dt, rate = _time_steps(t, sample_rate, len(g))
-    _check_turn_axes(g)
-    if accel is None:
-        accel = calibrate_accel(acc, sample_rate=rate, **(accel_options or {}))
-        notes.append(
-            f"accelerometer calibrated first: {accel.n_intervals} static poses, status "
-            f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
-        )
-    if not accel.success:
-        raise ValueError(
-            f"the accelerometer calibration is {accel.status} ({accel.solver_message}): the "
-            "gravity directions the gyro is fitted to would be wrong; fix the accelerometer "
-            "fit first (calib-jax accel)"
-        )
-    iv = np.asarray(accel.static_intervals, int).reshape(-1, 2)
-    if len(iv) == 0 or iv[-1, 1] > len(g):
-        raise ValueError(
-            "the accelerometer calibration holds no static intervals of this log (it was "
-            "fitted to other data, or loaded from a file written before they were kept): "
-            "leave accel= out to fit it here"
-        )
-
-    # rests: bias, noise and drift
-    iv = gyro_still_intervals(g, iv)
-    rest = np.concatenate([g[s:e] for s, e in iv])
-    bias = rest.mean(axis=0)
+    log = _pose_log(data, gyro, t, sample_rate, accel, accel_options)
+    acc, g, dt, rate, accel, iv = log.acc, log.g, log.dt, log.rate, log.accel, log.intervals
+    windows, dirs, pose_out, notes, warn = log.windows, log.dirs, log.pose_out, log.notes, log.warn
+    rest, bias = log.rest, log.bias
     pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
-    noise_raw = np.sqrt(
-        sum(((g[s:e] - g[s:e].mean(0)) ** 2).sum(0) for s, e in iv) / max(len(rest) - len(iv), 1)
-    )
-    pose_out = accel.apply(np.array([acc[s:e].mean(axis=0) for s, e in iv]))  # output units
-    dirs = pose_out / np.linalg.norm(pose_out, axis=1, keepdims=True)
-
-    # motions between consecutive poses
-    warn: list[str] = []
-    windows = _motion_windows(iv)
-    too_long = [(i, s, e) for i, s, e in windows if (e - s) / rate > MAX_MOTION_S]
-    if too_long:
-        notes.append(
-            f"{len(too_long)} motions longer than {MAX_MOTION_S:g} s left out (a pose the "
-            "detector missed, or a pause in motion; its gyro drift would dominate)"
-        )
-    clipped = _saturated(g, bias, noise_raw)
-    sat = [(i, s, e) for i, s, e in windows if clipped[s:e].any()]
-    if sat:
-        axes = [ax for a, ax in enumerate("xyz") if any(clipped[s:e, a].any() for _, s, e in sat)]
-        warn.append(
-            f"the gyro reads its extreme value in {int(clipped.any(axis=1).sum())} samples during "
-            f"{len(sat)} motions (axes {', '.join(axes)}): those motions were left out; turn "
-            "more slowly or choose a larger gyro range"
-        )
-    windows = [w for w in windows if w not in too_long and w not in sat]
-    if len(windows) < MIN_MOTIONS:
-        raise ValueError(
-            f"{len(windows)} usable motions between {len(iv)} static poses: the gyro fit needs "
-            f"at least {MIN_MOTIONS} rotations from one still pose to the next, about all "
-            "three axes; record more poses with turns between them"
-        )
-
+    noise_raw = _rest_noise(g, iv)
     motions, w = _pad_motions(windows, lambda s, e: g[s:e] - bias, dt, dirs)
     k = len(windows)
-    scale = _start_scale(motions, w)
+    scale = float(_compiled("start")(motions, jnp.asarray(w)))
     units, unit_notes = _resolve_units(units, abs(scale))
     notes += unit_notes
     C, cov, stderr, res, after = _fit_scaled(motions, w, scale, solver)
@@ -982,7 +1027,7 @@ def calibrate_gyro(
         warnings=warn,
         notes=notes,
         sensor_id=sensor_id,
-        source=source,
+        source=log.source,
     )
 
 

@@ -13,6 +13,8 @@ Calibrations (``equinox`` modules, hence pytrees):
 - :class:`Rotation`: a rotation vector (rad); ``apply`` rotates row vectors, v -> R v.
 - :class:`MargParams`: accelerometer, magnetometer, and the rotation that takes the
   calibrated magnetometer into the accelerometer's frame.
+- :class:`GyroParams`: ``apply`` returns the rates C (raw - b) in rad/s (g-sensitivity and
+  scale asymmetry zero unless :func:`calib_jax.calibrate_gyro` found them).
 
 Frames: every calibrated vector is in the sensor's own (body) frame, except that
 :class:`MargParams` returns the magnetometer in the accelerometer's frame. Attitude
@@ -21,10 +23,13 @@ quaternions are [w, x, y, z] and rotate body vectors into ENU (the BROAD convent
 Functions:
 
 - :func:`apply`, :func:`residual`: calibrated samples and the sphere residual.
-- :func:`fit_accel`, :func:`fit_mag`: the fit of one sensor, returning a :class:`Fit` whose
+- :func:`fit_accel`, :func:`fit_mag`, :func:`fit_gyro`: the fit of one sensor, returning a
+  :class:`Fit` whose
   ``params`` are differentiable in the samples, the weights and the reference magnitude by
   the implicit function theorem (:func:`calib_jax.implicit.solve_implicit`), never by
-  unrolling the LM loop. :func:`fit_batch` vmaps either over a leading sensor axis.
+  unrolling the LM loop. :func:`fit_batch` vmaps the first two over a leading sensor axis;
+  :func:`fit_gyro` takes :class:`GyroInputs` (:func:`gyro_inputs` cuts a log into them,
+  :func:`stack_gyro_inputs` stacks several for ``vmap``).
 - :func:`attitude`: the Gauss-Newton quaternion (paper 2, sec. 3) of every sample from raw
   accelerometer and magnetometer through a :class:`MargParams`.
 - :func:`propagate`, :func:`calibrated_covariance`, :func:`attitude_std`: the parameter
@@ -45,25 +50,33 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int, Real
 
 from .accel import fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
 from .geometry import centre_and_scale
+from .gyro import _angles, _pad_motions, _pose_log, start_scale
+from .implicit import solve_implicit
 from .mag import fit_ellipsoid_normalized
 from .models.accel import AccelParams
+from .models.gyro import GyroParams, Motions, gravity_residual
 from .models.mag import natural_radius, raw_calibration, raw_covariance, unpack
+from .padding import bucket
 from .rotations import euler_zyx_deg, rotvec_to_dcm
 from .status import CONVERGED_STATUSES, Status
 
 __all__ = [
     "AccelParams",
     "Fit",
+    "GyroInputs",
+    "GyroParams",
     "MagParams",
     "MargParams",
     "Rotation",
@@ -75,9 +88,12 @@ __all__ = [
     "euler_deg",
     "fit_accel",
     "fit_batch",
+    "fit_gyro",
+    "gyro_inputs",
     "fit_mag",
     "propagate",
     "residual",
+    "stack_gyro_inputs",
 ]
 
 
@@ -181,12 +197,13 @@ class Fit(eqx.Module):
     uncertainty, rebuild (J'WJ)^-1 from :func:`residual` at ``params`` inside your function.
     """
 
-    params: AccelParams | MagParams
+    params: AccelParams | MagParams | GyroParams
     covariance: Float[Array, "n n"]
     status: Int[Array, ""]
     """:class:`calib_jax.lm.Status` code; see ``converged``."""
     rms: Float[Array, ""]
-    """Weighted RMS of :func:`residual` at the optimum, unit of the magnitude."""
+    """Weighted RMS of :func:`residual` at the optimum, unit of the magnitude (the gyro:
+    of the angle by which the integrated rotations miss the next pose, radians)."""
     iterations: Int[Array, ""]
 
     @property
@@ -439,6 +456,124 @@ def fit_batch(
     if weights is None:
         weights = jnp.ones(raw.shape[:2], dtype)
     return jax.vmap(lambda r, g, w: fit(r, g, w, **options))(raw, mag, weights)
+
+
+# ---------------------------------------------------------------------------------------------
+# gyroscope
+
+
+class GyroInputs(NamedTuple):
+    """What :func:`fit_gyro` fits, padded to fixed shapes (weight 0 marks padding).
+
+    ``motions``: the raw gyro readings (not de-biased) from the last still sample of one pose
+    to the first of the next, their time steps and the two poses' unit gravity directions
+    (from the calibrated accelerometer); ``weights`` (K,) 1 per motion. ``rest`` (P, L, 3):
+    the raw readings of each still pose, ``rest_weights`` (P, L). Build it from a log with
+    :func:`gyro_inputs`; every floating leaf is differentiable.
+    """
+
+    motions: Motions
+    weights: jax.Array
+    rest: jax.Array
+    rest_weights: jax.Array
+
+
+def gyro_inputs(
+    data,
+    gyro=None,
+    *,
+    t=None,
+    sample_rate: float | None = None,
+    accel=None,
+    accel_options: dict | None = None,
+) -> GyroInputs:
+    """Cut a multi-position log into :class:`GyroInputs` (host side, NumPy): the same rests,
+    motions and gravity directions :func:`calib_jax.calibrate_gyro` fits, with its checks
+    and errors (``data``, ``gyro``, ``t``, ``sample_rate``, ``accel`` and ``accel_options``
+    as there). Motions are padded to powers of two in count and length, rests likewise."""
+    log = _pose_log(data, gyro, t, sample_rate, accel, accel_options)
+    g = log.g
+    motions, w = _pad_motions(log.windows, lambda s, e: g[s:e], log.dt, log.dirs)
+    lengths = [int(e - s) for s, e in log.intervals]
+    rest = np.zeros((bucket(len(lengths)), bucket(max(lengths)), 3))
+    rest_w = np.zeros(rest.shape[:2])
+    for i, (s, e) in enumerate(log.intervals):
+        rest[i, : e - s] = g[s:e]
+        rest_w[i, : e - s] = 1.0
+    return GyroInputs(motions, jnp.asarray(w), jnp.asarray(rest), jnp.asarray(rest_w))
+
+
+def stack_gyro_inputs(*inputs: GyroInputs) -> GyroInputs:
+    """Several logs' :class:`GyroInputs` padded to one shape (zeros, weight 0) and stacked on
+    a leading axis, for ``jax.vmap(fit_gyro)``."""
+
+    def stack(*leaves):
+        shape = np.max([np.shape(a) for a in leaves], axis=0)
+        pad = [[(0, n - m) for n, m in zip(shape, np.shape(a), strict=True)] for a in leaves]
+        return jnp.stack([np.pad(a, p) for a, p in zip(leaves, pad, strict=True)])
+
+    return jax.tree.map(stack, *inputs)
+
+
+def fit_gyro(inputs: GyroInputs, *, update_type: int = 1, max_iter: int = 100) -> Fit:
+    """The gyroscope of one multi-position log: bias b from the rests, then the nine entries
+    of C (true rate = C (raw - b), rad/s) by LM on the gravity residual
+    (:func:`calib_jax.models.gyro.gravity_residual`) from the scanned common scale: the fit
+    of :func:`calib_jax.calibrate_gyro` without its candidate effects (g-sensitivity and
+    scale asymmetry stay zero in the returned :class:`GyroParams`; test them there).
+
+    ``params`` are differentiable in every floating leaf of ``inputs`` (rates, time steps,
+    gravity directions, rest readings) by the implicit function theorem for C and the
+    weighted mean for b. ``covariance`` is over ``ravel_pytree(params)[0]`` (matrix, bias,
+    g_sensitivity, scale_asymmetry): C's block from the fit, conditional on the bias; b's
+    from the spread of the pose means (std / sqrt(poses), as the record); zero for the two
+    effects, which are held at zero. ``rms``: radians of miss per motion. Jittable and
+    vmappable (:func:`stack_gyro_inputs`); one compile per padded shape.
+    """
+    return _fit_gyro(inputs, update_type=update_type, max_iter=max_iter)
+
+
+def _gyro_bias(rest, rest_w):
+    """(b, its covariance): the mean of all rest samples; std of the pose means / sqrt(P)."""
+    n_pose = jnp.sum(rest_w, axis=1)
+    b = jnp.sum(rest_w[..., None] * rest, axis=(0, 1)) / jnp.sum(n_pose)
+    pose = n_pose > 0
+    means = jnp.sum(rest_w[..., None] * rest, axis=1) / jnp.where(pose, n_pose, 1.0)[:, None]
+    p = jnp.sum(pose)
+    centre = jnp.sum(jnp.where(pose[:, None], means, 0.0), axis=0) / p
+    var = jnp.sum(jnp.where(pose[:, None], (means - centre) ** 2, 0.0), axis=0) / p
+    return b, jnp.diag(var / p)
+
+
+def _gyro_residual(c9, args):
+    motions, bias, scale = args
+    return gravity_residual(c9, motions._replace(rates=(motions.rates - bias) * scale))
+
+
+@functools.partial(jax.jit, static_argnames=("update_type", "max_iter"))
+def _fit_gyro(inputs: GyroInputs, *, update_type, max_iter) -> Fit:
+    motions, w = inputs.motions, inputs.weights
+    dtype = motions.rates.dtype
+    bias, bias_cov = _gyro_bias(inputs.rest, inputs.rest_weights)
+    sg = jax.lax.stop_gradient
+    # the start scale only conditions the solve (C = scale C_n exactly), so it is a constant
+    scale = sg(start_scale(motions._replace(rates=motions.rates - bias), w))
+    pn, res = solve_implicit(
+        _gyro_residual,
+        jnp.eye(3, dtype=dtype).ravel(),
+        (motions, bias, scale),
+        weights=lambda args: jnp.repeat(sg(w), 3),
+        update_type=update_type,
+        max_iter=max_iter,
+        dof=2.0 * jnp.sum(w) - 9.0,  # each motion gives two independent residuals
+    )
+    C = (pn * scale).reshape(3, 3)
+    zero = jnp.zeros((3, 3), dtype)
+    params = GyroParams(matrix=C, bias=bias, g_sensitivity=zero, scale_asymmetry=zero[0])
+    cov = jax.scipy.linalg.block_diag(res.covariance * scale**2, sg(bias_cov), jnp.zeros((12, 12)))
+    miss = _angles(pn, motions._replace(rates=(motions.rates - bias) * scale))
+    rms = jnp.sqrt(jnp.sum(w * miss**2) / jnp.sum(w))
+    return Fit(params=params, covariance=cov, status=res.status, rms=rms, iterations=res.iterations)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -342,3 +342,52 @@ def test_marg_gains_the_gyro_block_and_says_why_when_it_cannot(sim, tmp_path):
     rec = calibrate_marg_log(tumble, accel="ellipsoid")
     assert rec.gyro is None
     assert any(w.startswith("gyroscope: not calibrated") for w in rec.warnings)
+
+
+def test_pipeline_fit_gyro_is_calibrate_gyro_differentiated_and_vmapped(sim):
+    """pipeline.fit_gyro on the inputs gyro_inputs cuts from a log: the record's C and b
+    (candidate effects off) to 1e-9 of a standard error; its implicit derivative against two
+    exact laws (readings scaled by k: C -> C / k, b -> k b; gravity directions turned by R:
+    C -> R C), to 1e-8 of |C| (measured 5e-15: both laws are exact and the derivative is
+    that of the optimum); two logs through
+    vmap as one by one, to 1e-9 of a standard error."""
+    from calib_jax import pipeline as pl
+
+    accel = calibrate_accel(sim.acc, sample_rate=sim.sample_rate)
+    cal = calibrate_gyro(
+        sim.acc, sim.gyro, t=sim.t, accel=accel, g_sensitivity=False, scale_asymmetry=False
+    )
+    inputs = pl.gyro_inputs(sim.acc, sim.gyro, t=sim.t, accel=accel)
+    fit = pl.fit_gyro(inputs)
+    C, b = np.asarray(fit.params.matrix), np.asarray(fit.params.bias)
+    assert bool(fit.converged)
+    assert np.abs((C - cal.matrix) / cal.stderr_matrix).max() < 1e-9
+    np.testing.assert_allclose(b, cal.bias, rtol=0, atol=1e-9 * cal.stderr_bias.min())
+    np.testing.assert_allclose(fit.stderr[:9], cal.stderr_matrix.ravel(), rtol=1e-9)
+    np.testing.assert_allclose(fit.stderr[9:12], cal.stderr_bias, rtol=1e-9)
+    assert np.degrees(float(fit.rms)) == pytest.approx(cal.rms_after_deg, rel=1e-9)
+
+    K = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # d R / d angle, z
+
+    def fitted(x):
+        k, angle = 1.0 + x[0], x[1]
+        R = jax.scipy.linalg.expm(angle * jnp.asarray(K))
+        m = inputs.motions
+        moved = inputs._replace(
+            motions=m._replace(rates=k * m.rates, before=m.before @ R.T, after=m.after @ R.T),
+            rest=k * inputs.rest,
+        )
+        p = pl.fit_gyro(moved).params
+        return p.matrix, p.bias
+
+    (dC, db) = jax.jacfwd(fitted)(jnp.zeros(2))
+    np.testing.assert_allclose(dC[..., 0], -C, rtol=0, atol=1e-8 * np.abs(C).max())
+    np.testing.assert_allclose(db[:, 0], b, rtol=0, atol=1e-9 * np.abs(b).max())
+    np.testing.assert_allclose(dC[..., 1], K @ C, rtol=0, atol=1e-8 * np.abs(C).max())
+
+    other = simulate_gyro_log(6, n_poses=12)
+    inputs2 = pl.gyro_inputs(other.acc, other.gyro, t=other.t)
+    both = jax.vmap(pl.fit_gyro)(pl.stack_gyro_inputs(inputs, inputs2))
+    for i, single in enumerate((fit, pl.fit_gyro(inputs2))):
+        se = np.asarray(single.stderr[:9]).reshape(3, 3)
+        assert np.abs((both.params.matrix[i] - single.params.matrix) / se).max() < 1e-9
