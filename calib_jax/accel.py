@@ -395,7 +395,7 @@ def calibrate_accel(
     units = _resolve_units(units, report.n_intervals, static_norm, fit_norm)
     g = _reference_magnitude(g, units, static_norm, output_units)
     out_units = output_units or ("g" if units == "counts" else units)
-    warn += _coverage_warnings(pts, c_s, n_free)
+    warn += _coverage_warnings(pts, c_s, n_free, _nominal(pts, units, g)[0])
 
     # normalise (centre and radius of the points' sphere) and fit
     k = r_s
@@ -510,14 +510,53 @@ def _reference_magnitude(
     return g
 
 
-def _coverage_warnings(pts: np.ndarray, c_s: np.ndarray, n_free: int) -> list[str]:
+SPREAD_MIN = 0.2
+"""RMS component of gravity's direction along some axis over the poses below which that axis
+counts as hardly tilted (0.58 for poses all round; BROAD trial 05's x axis: 0.15)."""
+
+
+def _coverage_warnings(
+    pts: np.ndarray, c_s: np.ndarray, n_free: int, nominal: np.ndarray | None = None
+) -> list[str]:
     """What the poses' spread leaves poorly determined (a ValueError when they lie in one
-    plane): one hemisphere only, or hardly more fit points than parameters."""
+    plane): one hemisphere or a narrower cap only, or hardly more fit points than parameters.
+    The spread is judged about the fitted centre and, where given, the nominal one (zero, or
+    mid-range counts), whichever sees the poses more bunched: a sphere through a cap of poses
+    puts its centre almost anywhere, and about that centre the cap can look spread."""
     warn = []
-    dirs = (pts - c_s) / np.linalg.norm(pts - c_s, axis=1, keepdims=True)
-    flatness, normal, min_cos, hemi_axis = _coverage(pts, dirs)
+    flatness, normal = _coverage(pts, np.ones((1, 3)))[:2]
     _check_plane(flatness, normal)
-    if min_cos > -0.05:
+    caps = []
+    for c in (c_s,) if nominal is None else (c_s, nominal):
+        d = pts - c
+        norms = np.linalg.norm(d, axis=1, keepdims=True)
+        if np.all(norms > 0):
+            caps.append(_coverage(pts, d / norms)[2:])
+    min_cos, hemi_axis = max(caps, key=lambda cap: cap[0])
+    # an axis hardly ever tilted towards the vertical: the poses' directions (about the
+    # nominal centre, which a cap of poses cannot move) barely vary along it
+    d = pts - (c_s if nominal is None else nominal)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    evals, evecs = np.linalg.eigh(d.T @ d / len(d))
+    for ev, axis in zip(evals, evecs.T, strict=True):
+        if ev < SPREAD_MIN**2:
+            warn.append(
+                f"gravity hardly varies along {_vec(axis)} in the sensor frame: its RMS "
+                f"component there is {np.sqrt(max(ev, 0.0)):.2f} of |g| over the poses "
+                f"({1 / np.sqrt(3):.2f} for poses all round), so that axis was hardly tilted "
+                "towards up or down and its gain, cross terms and bias are poorly determined "
+                "(a fit that does not converge or lands far from nominal is the symptom); add "
+                "poses with that axis pointing up and down"
+            )
+    if min_cos > 0.05:
+        warn.append(
+            f"all poses lie within {np.degrees(np.arccos(min(min_cos, 1.0))):.0f} deg of "
+            f"{_vec(hemi_axis)} in the sensor frame (less than a hemisphere): gravity was seen "
+            "from one side only, so "
+            "gains, cross terms and biases cannot be told apart; add poses with each axis up "
+            "and down"
+        )
+    elif min_cos > -0.05:
         warn.append(
             f"all poses lie in one hemisphere around {_vec(hemi_axis)}: gain and bias along it "
             "are correlated and poorly determined; add poses from the opposite side"

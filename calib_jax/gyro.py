@@ -427,14 +427,27 @@ def _saturated(g: np.ndarray, bias: np.ndarray, noise: np.ndarray) -> np.ndarray
     return bad
 
 
-def gyro_still_intervals(g: np.ndarray, intervals: np.ndarray) -> np.ndarray:
+MAX_REST_TURN_DEG_S = 0.1
+"""deg/s: a rest whose magnetic field direction turns faster than this is a steady turn (BROAD
+trial 02: a 26 deg/s turn about the vertical passed the accelerometer and gyro tests, its
+field turned 12 deg/s; true rests there turn < 0.025 deg/s)."""
+
+
+def gyro_still_intervals(
+    g: np.ndarray,
+    intervals: np.ndarray,
+    mag: np.ndarray | None = None,
+    sample_rate: float | None = None,
+) -> np.ndarray:
     """The accelerometer's static intervals narrowed to where the gyro is still too.
 
     A turn that starts slowly about an axis near gravity barely moves the gravity direction,
     so the accelerometer's intervals can reach into it; the gyro sees it. Within each
     interval the longest run of samples within 3 median deviations of the interval's median
     rate is kept (3 x the median of a three-axis noise norm is 2 standard deviations past its
-    99.9th percentile)."""
+    99.9th percentile). A steady turn about gravity leaves both quiet; with the magnetometer
+    (``mag`` on the same clock, and ``sample_rate``) an interval whose field direction turns
+    faster than :data:`MAX_REST_TURN_DEG_S` (first quarter against last) is dropped."""
     out = []
     for s, e in intervals:
         dev = np.linalg.norm(g[s:e] - np.median(g[s:e], axis=0), axis=1)
@@ -442,8 +455,25 @@ def gyro_still_intervals(g: np.ndarray, intervals: np.ndarray) -> np.ndarray:
         edges = np.flatnonzero(np.diff(quiet.astype(int)))
         starts, stops = edges[0::2], edges[1::2]
         j = int(np.argmax(stops - starts))
-        out.append((s + starts[j], s + stops[j]))
+        s, e = s + starts[j], s + stops[j]
+        if (
+            mag is None
+            or sample_rate is None
+            or _field_turn_deg_s(mag[s:e], sample_rate) <= (MAX_REST_TURN_DEG_S)
+        ):
+            out.append((s, e))
     return np.array(out, int).reshape(-1, 2)
+
+
+def _field_turn_deg_s(m: np.ndarray, sample_rate: float) -> float:
+    """How fast the field direction turns over a stretch: the angle between the means of its
+    first and last quarters over the time between their centres (0 when too short)."""
+    q = len(m) // 4
+    if q < 2:
+        return 0.0
+    a, b = np.nanmean(m[:q], axis=0), np.nanmean(m[-q:], axis=0)
+    cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))) / ((len(m) - q) / sample_rate)
 
 
 def _motion_windows(intervals: np.ndarray) -> list[tuple[int, int, int]]:
@@ -724,8 +754,10 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
 
     notes: list[str] = []
     source = None
+    mag = None  # with a magnetometer, a steady turn about gravity is not taken for a rest
     if isinstance(data, SensorLog):
         acc, g = data.vectors("accel"), data.vectors("gyro")
+        mag = None if data.mag is None else np.asarray(data.mag, float)
         t, sample_rate = data.t, sample_rate or data.sample_rate
         notes += list(data.notes)
         source = data.path
@@ -754,6 +786,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
             "out (the time column spans them)"
         )
         acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
+        mag = None if mag is None else mag[rows]
     dt, rate = _time_steps(t, sample_rate, len(g))
     _check_turn_axes(g)
     if accel is None:
@@ -763,10 +796,12 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
             f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
         )
     if not accel.success:
+        coverage = [w for w in accel.warnings if w.startswith(("all poses lie", "gravity hardly"))]
         raise ValueError(
-            f"the accelerometer calibration is {accel.status} ({accel.solver_message}): the "
-            "gravity directions the gyro is fitted to would be wrong; fix the accelerometer "
-            "fit first (calib-jax accel)"
+            f"the accelerometer calibration is {accel.status} ({accel.solver_message}"
+            + "".join(f"; {w}" for w in coverage)
+            + "): the gravity directions the gyro is fitted to would be wrong; fix the "
+            "accelerometer fit first (calib-jax accel)"
         )
     iv = np.asarray(accel.static_intervals, int).reshape(-1, 2)
     if len(iv) == 0 or iv[-1, 1] > len(g):
@@ -777,7 +812,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
         )
 
     # rests: bias and noise (for the clipping test)
-    iv = gyro_still_intervals(g, iv)
+    iv = gyro_still_intervals(g, iv, mag, rate)
     rest = np.concatenate([g[s:e] for s, e in iv])
     bias = rest.mean(axis=0)
     noise_raw = _rest_noise(g, iv)

@@ -1,6 +1,7 @@
 """calibrate_accel end to end on simulated logs with known truth, and every bad input."""
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -161,6 +162,22 @@ def test_one_hemisphere_is_flagged():
     # the z gain and bias trade off: their correlation is strong and reported
     i, j = 2, 8
     assert abs(cal.correlation[i, j]) > 0.9
+
+
+def test_an_axis_never_tilted_is_named():
+    # 30 poses whose y component stays within +-0.12 g (RMS about 0.07): the y axis was never
+    # turned towards up or down. Not a plane (the tilt is small, not zero), so the fit runs and
+    # the warning names the axis; BROAD trial 05 (RMS 0.15 along y) is the real case
+    rng = np.random.default_rng(3)
+    ang = rng.uniform(0, 2 * np.pi, 30)
+    y = rng.uniform(-0.12, 0.12, 30)
+    d = np.stack([np.cos(ang), y, np.sin(ang)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    cal = cj.calibrate_accel(sim(9, d).raw, **DET)
+    hit = [w for w in cal.warnings if w.startswith("gravity hardly varies")]
+    assert len(hit) == 1 and re.search(r"along \[[+-]0\.0\d, [+-]1\.00, [+-]0\.0\d\]", hit[0])
+    good = cj.calibrate_accel(sim(9, paper48_directions()).raw, **DET)
+    assert not any(w.startswith("gravity hardly varies") for w in good.warnings)
 
 
 def test_saturated_axis_is_excluded_and_reported():

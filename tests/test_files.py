@@ -355,6 +355,26 @@ def test_binary_files(tmp_path, content, match):
         load_log(_write(tmp_path, content, "log.dat"))
 
 
+def test_hdf5_in_broads_layout_loads_and_any_other_is_named(tmp_path):
+    # BROAD's trials (imu_acc, imu_gyr, imu_mag, the rate as an attribute) load like any log;
+    # another HDF5 layout says which (N, 3) datasets it holds and what to do
+    h5py = pytest.importorskip("h5py")
+    x = ROWS[:, 1:4]
+    with h5py.File(tmp_path / "trial.hdf5", "w") as f:
+        f["imu_acc"], f["imu_gyr"], f["imu_mag"] = x, 0.1 * x, 40 * x
+        f["opt_quat"] = np.tile([1.0, 0, 0, 0], (len(x), 1))
+        f.attrs["sampling_rate"] = 285.714
+    log = load_log(tmp_path / "trial.hdf5")
+    np.testing.assert_array_equal(log.acc, x)
+    np.testing.assert_array_equal(log.gyro, 0.1 * x)
+    np.testing.assert_array_equal(log.mag, 40 * x)
+    assert log.sample_rate == pytest.approx(285.714) and "BROAD" in log.notes[0]
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f["accel"], f["temperature"] = x, x[:, 0]
+    with pytest.raises(ValueError, match=r"without BROAD's datasets.*accel \(\d+, 3\)"):
+        load_log(tmp_path / "other.h5")
+
+
 def test_truncated_or_corrupt_mat(tmp_path):
     good = tmp_path / "good.mat"
     scipy.io.savemat(good, {"data": ROWS[:, :4]})

@@ -20,6 +20,10 @@ Supported:
 * MATLAB .mat (real binary MAT files through scipy.io; imu_tk's ``.mat`` files are text and
   are read as text): variables named like columns (``ax``, ``acc_x``, ...), N x 3 matrices
   named for a sensor (``acc``, ``gyro``, ``mag``) or one N x k matrix read like headerless text.
+* HDF5 in the BROAD benchmark's layout (``imu_acc``, ``imu_gyr``, ``imu_mag``, the rate in the
+  ``sampling_rate`` attribute), through h5py (``pip install 'calib_jax[hdf5]'``); its optical
+  truth is read by :func:`calib_jax.io.broad.load_broad`. Other HDF5 layouts: an error naming
+  their (N, 3) datasets.
 
 Rows with the wrong number of fields are skipped and counted; cells that are not numbers become
 NaN and, with inf and absurd magnitudes, are counted per column in the notes (dropping them is the
@@ -251,7 +255,7 @@ def _decode(raw: bytes, path: Path, notes: list[str], partial: bool = False) -> 
 
     `partial`: `raw` is the start of a longer file, possibly cut inside a character.
     """
-    if raw.startswith(b"\x89HDF\r\n\x1a\n"):
+    if raw.startswith(_HDF5_MAGIC):
         raise _binary(path, "an HDF5 file; read it with h5py")
     if raw.startswith(b"PK\x03\x04"):
         raise _binary(path, "a zip archive, or an Excel/ODF workbook; unzip it or save as CSV")
@@ -812,6 +816,57 @@ def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
     return table.get(width)
 
 
+_HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+_BROAD_DATASETS = {"acc": "imu_acc", "gyro": "imu_gyr", "mag": "imu_mag"}
+
+
+def _read_hdf5(path: Path, sample_rate: float | None, max_rows: int | None) -> SensorLog:
+    """An HDF5 file in BROAD's layout (``imu_acc``, ``imu_gyr``, ``imu_mag``, (N, 3) each, the
+    rate in the ``sampling_rate`` attribute); any other layout: a ValueError listing the
+    (N, 3) datasets found and what to do."""
+    try:
+        import h5py
+    except ImportError:
+        raise ValueError(
+            f"{path} is an HDF5 file: reading it needs h5py (pip install h5py, or "
+            "pip install 'calib_jax[hdf5]'), or export the sensor columns to CSV"
+        ) from None
+    try:
+        with h5py.File(path, "r") as f:
+            shapes = {k: f[k].shape for k in f if isinstance(f[k], h5py.Dataset)}
+            if _BROAD_DATASETS["acc"] not in shapes:
+                triples = [f"{k} {v}" for k, v in shapes.items() if len(v) == 2 and v[1] == 3]
+                raise ValueError(
+                    f"{path} is an HDF5 file without BROAD's datasets (imu_acc, imu_gyr, imu_mag)"
+                    f"; its (N, 3) datasets: {', '.join(triples) or 'none'}. Export the "
+                    "sensor columns to CSV (ax, ay, az, gx, ... as the header)"
+                )
+            rows = slice(None, max_rows)
+            vec = {
+                k: np.asarray(f[name][rows], float) if name in shapes else None
+                for k, name in _BROAD_DATASETS.items()
+            }
+            rate = sample_rate or float(f.attrs.get("sampling_rate", 0.0)) or None
+    except OSError as exc:
+        raise ValueError(f"{path} looks like HDF5 but h5py cannot read it: {exc}") from None
+    found = [name for k, name in _BROAD_DATASETS.items() if vec[k] is not None]
+    notes = [
+        f"HDF5 in BROAD's layout: {', '.join(found)}"
+        + (f" at {rate:g} Hz" if rate else ", no sampling_rate attribute (give --sample-rate)")
+        + "; the optical truth, if any, is read by calib_jax.io.broad.load_broad"
+    ]
+    columns = {k: name for k, name in _BROAD_DATASETS.items() if vec[k] is not None}
+    return SensorLog(
+        acc=vec["acc"],
+        gyro=vec["gyro"],
+        mag=vec["mag"],
+        sample_rate=rate,
+        path=str(path),
+        columns=columns,
+        notes=notes,
+    )
+
+
 def load_log(
     path: str | Path,
     columns: str | dict[str, str] | None = None,
@@ -855,6 +910,8 @@ def load_log(
     mapping = parse_columns(columns)
     notes: list[str] = []
     raw = _read_bytes(path, ends=_HEAD_CHARS)
+    if raw[0].startswith(_HDF5_MAGIC):
+        return _read_hdf5(path, sample_rate, max_rows)
     big = len(raw[1]) == _HEAD_CHARS // 2 and len(raw[0]) == _HEAD_CHARS
     lazy = (
         big
