@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .export import Correction, corrections
+from .export import G_STANDARD, Correction, corrections
 from .io.files import SensorLog, iter_rows, load_log
 
 _TRIADS = (("acc", "a", "accel"), ("gyro", "g", "gyro"), ("mag", "m", "mag"))
@@ -67,14 +67,40 @@ def _plan(corr: dict[str, Correction], log: SensorLog) -> tuple[dict[str, Correc
             f"{wanted} columns (found: {', '.join(log.columns) or 'none'}); map them with "
             "--columns"
         )
+    if "gyro" in use and use["gyro"].needs_acc and _to_ms2(use.get("acc")) is None:
+        notes.append(
+            "the gyroscope's g-sensitivity G is not applied: it needs the calibrated "
+            "acceleration in m/s^2, and the calibration has no accelerometer correction to m/s^2 "
+            "or g (apply a MARG record holding both, or in Python "
+            "Correction.apply(raw, acc=...)); the rates are off by up to |G| g"
+        )
     return use, notes
 
 
+def _to_ms2(acc: Correction | None) -> float | None:
+    """m/s^2 per unit of the accelerometer correction's output (None: no usable unit)."""
+    if acc is None:
+        return None
+    return {"m/s^2": 1.0, "g": G_STANDARD}.get(acc.output_units or "")
+
+
+def _corrected(use: dict[str, Correction], raw: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Each triad in ``use`` corrected; the gyroscope's g-sensitivity with the corrected
+    acceleration of the same rows, in m/s^2, where the calibration gives it."""
+    out = {attr: c.apply(raw[attr]) for attr, c in use.items() if attr != "gyro"}
+    if "gyro" in use:
+        scale = _to_ms2(use.get("acc"))
+        acc = None if scale is None else scale * out["acc"]
+        out["gyro"] = use["gyro"].apply(raw["gyro"], acc=acc)
+    return out
+
+
 def correct_log(cal, log: SensorLog) -> SensorLog:
-    """A copy of a loaded log with its accelerometer and magnetometer corrected (a MARG
-    magnetometer rotated into the accelerometer's frame); the other columns as they were."""
+    """A copy of a loaded log with each triad the calibration holds corrected (a MARG
+    magnetometer rotated into the accelerometer's frame, a gyroscope's g-sensitivity removed
+    with the corrected acceleration); the other columns as they were."""
     use, notes = _plan(corrections(cal), log)
-    new = {attr: c.apply(getattr(log, attr)) for attr, c in use.items()}
+    new = _corrected(use, {attr: getattr(log, attr) for attr in use})
     return replace(log, **new, notes=[*log.notes, *notes], layout=None)
 
 
@@ -148,10 +174,13 @@ def _stream(path, head: SensorLog, use: dict[str, Correction], chunk_rows: int):
             part.t = block[:, src["t"]] * lay["time_scale"]
         if "temp" in src:
             part.temp = block[:, src["temp"]]
-        for attr, p, _ in _TRIADS:
-            if getattr(head, attr) is not None:
-                x = block[:, [src[p + a] for a in "xyz"]]
-                setattr(part, attr, use[attr].apply(x) if attr in use else x)
+        raw = {
+            attr: block[:, [src[p + a] for a in "xyz"]]
+            for attr, p, _ in _TRIADS
+            if getattr(head, attr) is not None
+        }
+        for attr, x in (raw | _corrected(use, raw)).items():
+            setattr(part, attr, x)
         yield _columns(part), bad
 
 

@@ -780,8 +780,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a saved calibration for firmware (C header), imu_tk, imucal or ROS",
         description="Write CAL in another tool's format: 'c' (a C header: float constants and "
         "an inline correction function), 'imu_tk' (CalibratedTriad_ text: T, K, B), 'imucal' "
-        "(FerrarisCalibrationInfo JSON; accelerometer only) or 'ros' (imu_calib's YAML: SM, "
-        "bias). Every format holds the same correction x = C (raw - b).",
+        "(FerrarisCalibrationInfo JSON: accelerometer and gyroscope, G as K_ga) or 'ros' "
+        "(imu_calib's YAML: SM, bias). Every format holds the same correction x = C (raw - b); "
+        "a gyroscope's g-sensitivity G goes to c and imucal only (imu_tk and ros refuse it).",
     )
     ex.add_argument("calibration", metavar="CAL", help="the saved calibration (JSON)")
     ex.add_argument("--format", required=True, choices=["c", "imu_tk", "imucal", "ros"])

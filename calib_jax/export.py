@@ -63,16 +63,52 @@ class Correction:
     source: str | None = None
     notes: tuple[str, ...] = ()
     """What the file held that this correction does not apply."""
+    g_sensitivity: np.ndarray | None = None
+    """Gyroscope only: G (3 x 3), input units per m/s^2 of calibrated acceleration a, removed
+    as raw - b - G a (imucal's K_ga). None: no such term."""
+    scale_asymmetry: np.ndarray | None = None
+    """Gyroscope only: s (3,), x -> x (1 + s sign(x)) per axis before C. None: none."""
 
-    def apply(self, raw) -> np.ndarray:
-        """Corrected vectors for one reading (3,) or many (N, 3)."""
-        return (np.asarray(raw, float) - self.bias) @ self.matrix.T
+    @property
+    def needs_acc(self) -> bool:
+        """True when :meth:`apply` needs the calibrated acceleration (a non-zero G)."""
+        return self.g_sensitivity is not None and bool(np.any(self.g_sensitivity != 0))
+
+    def apply(self, raw, acc=None) -> np.ndarray:
+        """Corrected vectors for one reading (3,) or many (N, 3); ``acc`` the calibrated
+        acceleration in m/s^2 of the same samples, used where G is not zero (left out, G is
+        not applied: :attr:`needs_acc` tells)."""
+        x = np.asarray(raw, float) - self.bias
+        if acc is not None and self.needs_acc:
+            x = x - np.asarray(acc, float) @ self.g_sensitivity.T
+        if self.scale_asymmetry is not None and np.any(self.scale_asymmetry != 0):
+            x = x * (1.0 + self.scale_asymmetry * np.sign(x))
+        return x @ self.matrix.T
 
     def describe(self) -> str:
         """One line: the sensor, the equation, the units and the frame."""
         units = f"{self.input_units or 'raw units'} -> {self.output_units or 'calibrated units'}"
         frame = ", in the accelerometer's frame" if self.frame == "accel" else ""
-        return f"{self.sensor}: x = C (raw - b), {units}{frame}"
+        inner = "raw - b - G a" if self.needs_acc else "raw - b"
+        if self.scale_asymmetry is not None and np.any(self.scale_asymmetry != 0):
+            return f"{self.sensor}: x = C ((1 + s sign(d)) d), d = {inner}, {units}{frame}"
+        return f"{self.sensor}: x = C ({inner}), {units}{frame}"
+
+    def _refuse_effects(self, fmt: str) -> None:
+        """A ValueError when this correction has terms ``fmt`` cannot hold (G, s)."""
+        lost = [
+            name
+            for name, v in (
+                ("g-sensitivity G", self.g_sensitivity),
+                ("scale asymmetry s", self.scale_asymmetry),
+            )
+            if v is not None and np.any(np.asarray(v) != 0)
+        ]
+        if lost:
+            raise ValueError(
+                f"the {self.sensor} calibration has {' and '.join(lost)}, which {fmt}'s format "
+                "cannot hold; export it as c (the header applies them) or imucal (G as K_ga)"
+            )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -135,6 +171,22 @@ def _ellipsoid(cal: MagCalibration) -> Correction:
     )
 
 
+def _gyro(g) -> Correction:
+    """The correction of a :class:`~calib_jax.GyroCalibration`: C, b, and G and s where the
+    fit found them."""
+    return Correction(
+        sensor="gyro",
+        matrix=np.array(g.matrix, float),
+        bias=np.array(g.bias, float),
+        input_units=g.input_units,
+        output_units=g.output_units,
+        status=g.status,
+        source=g.source,
+        g_sensitivity=np.array(g.g_sensitivity, float),
+        scale_asymmetry=np.array(g.scale_asymmetry, float),
+    )
+
+
 def correction_from_result(r: dict) -> Correction:
     """The correction of one fleet result (:func:`calib_jax.fleet.calibrate_files`, or an entry
     of ``calib-jax batch --json``): 9 parameters are paper 1's accelerometer vector, 12 the
@@ -177,22 +229,13 @@ def _from_dict(d: dict, where) -> dict[str, Correction]:
             status=d.get("status"),
             source=d.get("source"),
         )
+        if d.get("gyro") is not None:
+            out.update(_from_dict(d["gyro"], where))
         return out
     if kind == "gyro":
         from .gyro import GyroCalibration
 
-        g = GyroCalibration.from_dict(d, source=where)
-        return {
-            "gyro": Correction(
-                sensor="gyro",
-                matrix=np.array(g.matrix, float),
-                bias=np.array(g.bias, float),
-                input_units=g.input_units,
-                output_units=g.output_units,
-                status=g.status,
-                source=g.source,
-            )
-        }
+        return {"gyro": _gyro(GyroCalibration.from_dict(d, source=where))}
     if kind == "ellipsoid":
         cal = MagCalibration.from_dict(d, source=where)
         return {cal.sensor: _ellipsoid(cal)}
@@ -221,7 +264,9 @@ def write(cal, fmt: str, *, sensor: str | None = None, name: str = "calib") -> s
     if fmt == "c":
         return to_c_header(corr, name=name)
     if fmt == "imucal":
-        return to_imucal_json(_one(corr, sensor or "accel", fmt))
+        if sensor is not None:
+            return to_imucal_json(*_imucal_pair({sensor: _one(corr, sensor, fmt)}))
+        return to_imucal_json(*_imucal_pair(corr))
     if fmt == "imu_tk":
         return to_imu_tk(_one(corr, sensor, fmt))
     if fmt == "ros":
@@ -246,6 +291,16 @@ def _one(corr: dict[str, Correction], sensor: str | None, fmt: str) -> Correctio
         )
         raise ValueError(f"the calibration has no {sensor} correction to write as {fmt}: {why}")
     return corr[sensor]
+
+
+def _imucal_pair(corr: dict[str, Correction]) -> tuple[Correction | None, Correction | None]:
+    """(accelerometer, gyroscope) for imucal's file, which holds those two and no more."""
+    if "accel" not in corr and "gyro" not in corr:
+        raise ValueError(
+            "imucal's FerrarisCalibrationInfo holds an accelerometer and a gyroscope, no "
+            "magnetometer; export the magnetometer as c, imu_tk or ros"
+        )
+    return corr.get("accel"), corr.get("gyro")
 
 
 def _header_lines(corr: dict[str, Correction]) -> list[str]:
@@ -282,25 +337,58 @@ def to_c_header(corr: dict[str, Correction] | Correction, name: str = "calib") -
         "",
     ]
     for s, c in corr.items():
-        S = s.upper()
-        rows = ",\n".join("    {" + ", ".join(_cfloat(v) for v in row) + "}" for row in c.matrix)
-        out += [
-            f"/* {c.describe()} */",
-            f"static const float {up}_{S}_C[3][3] = {{\n{rows}\n}};",
-            f"static const float {up}_{S}_B[3] = {{" + ", ".join(_cfloat(v) for v in c.bias) + "};",
-            "",
-            f"static inline void {ident}_{s}_correct(const float raw[3], float out[3])",
-            "{",
-            f"    const float d[3] = {{raw[0] - {up}_{S}_B[0], raw[1] - {up}_{S}_B[1], "
-            f"raw[2] - {up}_{S}_B[2]}};",
-            "    for (int i = 0; i < 3; ++i)",
-            f"        out[i] = {up}_{S}_C[i][0] * d[0] + {up}_{S}_C[i][1] * d[1] + "
-            f"{up}_{S}_C[i][2] * d[2];",
-            "}",
-            "",
-        ]
+        out += _c_block(c, f"{up}_{s.upper()}", f"{ident}_{s}")
     out += [f"#endif /* {guard} */", ""]
     return "\n".join(out)
+
+
+def _c_matrix(name: str, m: np.ndarray) -> str:
+    rows = ",\n".join("    {" + ", ".join(_cfloat(v) for v in row) + "}" for row in m)
+    return f"static const float {name}[3][3] = {{\n{rows}\n}};"
+
+
+def _c_vector(name: str, v: np.ndarray) -> str:
+    return f"static const float {name}[3] = {{" + ", ".join(_cfloat(x) for x in v) + "};"
+
+
+def _c_block(c: Correction, const: str, fun: str) -> list[str]:
+    """One triad's constants and its inline correct function; a gyroscope with
+    g-sensitivity takes the calibrated acceleration (m/s^2) too, one with scale asymmetry
+    scales each axis by 1 + s sign(d)."""
+    asym = c.scale_asymmetry is not None and bool(np.any(c.scale_asymmetry != 0))
+    lines = [f"/* {c.describe()} */", _c_matrix(f"{const}_C", c.matrix)]
+    lines.append(_c_vector(f"{const}_B", c.bias))
+    d = [f"raw[{i}] - {const}_B[{i}]" for i in range(3)]
+    args = "const float raw[3], float out[3]"
+    if c.needs_acc:
+        lines.append(
+            f"/* G, {c.input_units or 'input units'} per m/s^2 of calibrated acceleration */"
+        )
+        lines.append(_c_matrix(f"{const}_G", c.g_sensitivity))
+        args = "const float raw[3], const float acc[3], float out[3]"
+        d = [
+            f"{d[i]} - ({const}_G[{i}][0] * acc[0] + {const}_G[{i}][1] * acc[1] + "
+            f"{const}_G[{i}][2] * acc[2])"
+            for i in range(3)
+        ]
+    if asym:
+        lines.append(_c_vector(f"{const}_S", c.scale_asymmetry))
+    lines += ["", f"static inline void {fun}_correct({args})", "{", "    float d[3];"]
+    lines += [f"    d[{i}] = {d[i]};" for i in range(3)]
+    if asym:
+        lines += [
+            "    for (int i = 0; i < 3; ++i)",
+            f"        d[i] *= 1.0f + (d[i] > 0.0f ? {const}_S[i] : d[i] < 0.0f ? -{const}_S[i] "
+            ": 0.0f);",
+        ]
+    lines += [
+        "    for (int i = 0; i < 3; ++i)",
+        f"        out[i] = {const}_C[i][0] * d[0] + {const}_C[i][1] * d[1] + "
+        f"{const}_C[i][2] * d[2];",
+        "}",
+        "",
+    ]
+    return lines
 
 
 def _cfloat(v: float) -> str:
@@ -329,6 +417,7 @@ def imu_tk_factors(c: Correction) -> tuple[np.ndarray, np.ndarray]:
 def to_imu_tk(c: Correction) -> str:
     """imu_tk's calibration text (``CalibratedTriad_::load`` reads it): T, K and B, numbers
     only, as imu_tk writes them (a comment would break its reader)."""
+    c._refuse_effects("imu_tk")
     T, K = imu_tk_factors(c)
 
     def block(m):
@@ -337,46 +426,49 @@ def to_imu_tk(c: Correction) -> str:
     return f"{block(T)}\n\n{block(K)}\n\n{block(c.bias.reshape(3, 1))}\n\n"
 
 
-def to_imucal_json(c: Correction, gyro: Correction | None = None) -> str:
+def to_imucal_json(c: Correction | None, gyro: Correction | None = None) -> str:
     """imucal's ``FerrarisCalibrationInfo`` JSON (``CalibrationInfo.from_json_file`` reads it).
 
-    imucal applies a = R_a^-1 K_a^-1 (raw - b_a): K_a R_a = C^-1, K_a the row norms of C^-1
-    (the sensitivities) and R_a its rows made unit (the axes' directions, Ferraris' form).
-    calib_jax has no gyroscope calibration yet: unless ``gyro`` is given, K_g and R_g are the
-    identity and b_g, K_ga zero, so imucal passes the gyroscope through unchanged, and the
-    ``comment`` field says so.
+    imucal applies a = R_a^-1 K_a^-1 (raw - b_a) and w = R_g^-1 K_g^-1 (raw - K_ga a - b_g):
+    K R = C^-1, K the row norms of C^-1 (the sensitivities) and R its rows made unit (the
+    axes' directions, Ferraris' form); K_ga is calib_jax's g-sensitivity G (per m/s^2, as
+    imucal's). A triad not given is written as the identity (passed through unchanged) and
+    the ``comment`` field says so. Scale asymmetry has no place in the file: an error.
     """
-    if c.sensor != "accel":
-        raise ValueError(
-            "imucal's FerrarisCalibrationInfo holds an accelerometer (and a gyroscope), no "
-            "magnetometer; export the magnetometer as c, imu_tk or ros"
-        )
-    M = np.linalg.inv(c.matrix)
-    k = np.linalg.norm(M, axis=1)
-    comment = f"calib_jax: {c.describe()}; from {c.source or 'an unnamed log'}, status {c.status}"
-    if gyro is None:
-        Kg, Rg, bg = np.eye(3), np.eye(3), np.zeros(3)
-        comment += (
-            "; gyroscope NOT calibrated by calib_jax: K_g, R_g identity and b_g, K_ga zero "
-            "pass it through unchanged"
-        )
-    else:
-        Mg = np.linalg.inv(gyro.matrix)
-        kg = np.linalg.norm(Mg, axis=1)
-        Kg, Rg, bg = np.diag(kg), Mg / kg[:, None], gyro.bias
+    for x in (c, gyro):
+        if x is not None and x.sensor == "mag":
+            _imucal_pair({"mag": x})
+    if gyro is not None and gyro.scale_asymmetry is not None:
+        replace(gyro, g_sensitivity=None)._refuse_effects("imucal")
+
+    def factors(x: Correction | None):
+        if x is None:
+            return np.eye(3), np.eye(3), np.zeros(3)
+        M = np.linalg.inv(x.matrix)
+        k = np.linalg.norm(M, axis=1)
+        return np.diag(k), M / k[:, None], np.asarray(x.bias, float)
+
+    lead = c if c is not None else gyro
+    comment = "calib_jax: " + "; ".join(x.describe() for x in (c, gyro) if x is not None)
+    comment += f"; from {lead.source or 'an unnamed log'}, status {lead.status}"
+    for name, x in (("accelerometer", c), ("gyroscope", gyro)):
+        if x is None:
+            comment += f"; {name} NOT calibrated by calib_jax: identity terms pass it through"
+    (Ka, Ra, ba), (Kg, Rg, bg) = factors(c), factors(gyro)
+    G = gyro.g_sensitivity if gyro is not None and gyro.needs_acc else np.zeros((3, 3))
     d = {
-        "acc_unit": c.output_units,
+        "acc_unit": None if c is None else c.output_units,
         "gyr_unit": None if gyro is None else gyro.output_units,
-        "from_acc_unit": c.input_units,
+        "from_acc_unit": None if c is None else c.input_units,
         "from_gyr_unit": None if gyro is None else gyro.input_units,
         "comment": comment,
-        "K_a": np.diag(k).tolist(),
-        "R_a": (M / k[:, None]).tolist(),
-        "b_a": np.asarray(c.bias).tolist(),
+        "K_a": Ka.tolist(),
+        "R_a": Ra.tolist(),
+        "b_a": ba.tolist(),
         "K_g": Kg.tolist(),
         "R_g": Rg.tolist(),
-        "K_ga": np.zeros((3, 3)).tolist(),
-        "b_g": np.asarray(bg).tolist(),
+        "K_ga": np.asarray(G, float).tolist(),
+        "b_g": bg.tolist(),
         "cal_type": "Ferraris",
         "_format_version": "2.0.0",
     }
@@ -387,6 +479,7 @@ def to_ros_yaml(c: Correction) -> str:
     """``imu_calib``'s YAML (``SM`` row-major, ``bias``): corrected = SM raw - bias, so
     SM = C and bias = C b. An accelerometer calibrated to g is scaled to m/s^2, the unit of
     ``sensor_msgs/Imu`` (REP 103); the comment says what was done."""
+    c._refuse_effects("imu_calib's YAML")
     C, bias = np.asarray(c.matrix, float), c.matrix @ c.bias
     out_units = c.output_units
     lines = ["# " + ln for ln in _header_lines({c.sensor: c})]
@@ -439,7 +532,7 @@ def read(path: str | Path, sensor: str | None = None) -> dict[str, Correction]:
         except json.JSONDecodeError as exc:
             raise ValueError(f"{path} is not a calibration JSON file: {exc}") from None
         if isinstance(d, dict) and "cal_type" in d:
-            return {"accel": from_imucal_json(text, source=str(path))}
+            return from_imucal_json(text, source=str(path))
         d = _read_json(path)  # calib_jax's own: NaN tokens and versions checked
         return _from_dict(d, str(path))
     if re.search(r"^\s*SM\s*:", text, re.M):
@@ -474,31 +567,44 @@ def from_imu_tk(text: str, sensor: str = "accel", source: str | None = None) -> 
     return _checked(Correction(sensor, T @ K, B, source=source), source)
 
 
-def from_imucal_json(text: str, source: str | None = None) -> Correction:
-    """The accelerometer correction of imucal's Ferraris (or Turntable) JSON."""
+def from_imucal_json(text: str, source: str | None = None) -> dict[str, Correction]:
+    """The corrections of imucal's Ferraris (or Turntable) JSON: the accelerometer, and the
+    gyroscope (with K_ga as its g-sensitivity) unless the file passes it through (identity
+    K_g and R_g, zero b_g and K_ga)."""
     d = json.loads(text)
     if d.get("cal_type") not in ("Ferraris", "Turntable"):
         raise ValueError(
             f"{source or 'text'}: imucal calibration type {d.get('cal_type')!r} is not read "
             "here (Ferraris and Turntable are)"
         )
-    try:
-        K, R = np.asarray(d["K_a"], float), np.asarray(d["R_a"], float)
-        b = np.asarray(d["b_a"], float)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{source or 'text'}: imucal JSON without a usable {exc}") from None
-    C = np.linalg.inv(R) @ np.linalg.inv(K)
-    notes = ()
-    if d.get("K_g") is not None and not np.allclose(np.asarray(d["K_g"], float), np.eye(3)):
-        notes = (
-            "the imucal file's gyroscope calibration (K_g, R_g, b_g, K_ga) is not applied: "
-            "calib_jax has no gyroscope model yet, so gx, gy, gz are written as read",
+
+    def matrices(*keys):
+        try:
+            return [np.asarray(d[k], float) for k in keys]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{source or 'text'}: imucal JSON without a usable {exc}") from None
+
+    K, R, b = matrices("K_a", "R_a", "b_a")
+    out = {
+        "accel": _checked(
+            Correction(
+                "accel", np.linalg.inv(R) @ np.linalg.inv(K), b, input_units=d.get("from_acc_unit"),
+                output_units=d.get("acc_unit"), source=source,
+            ),
+            source,
         )
-    c = Correction(
-        "accel", C, b, input_units=d.get("from_acc_unit"), output_units=d.get("acc_unit"),
-        source=source, notes=notes,
+    }  # fmt: skip
+    if d.get("K_g") is None:
+        return out
+    Kg, Rg, bg, Kga = matrices("K_g", "R_g", "b_g", "K_ga")
+    if np.allclose(Kg @ Rg, np.eye(3)) and not np.any(bg) and not np.any(Kga):
+        return out  # the gyroscope passed through
+    gyro = Correction(
+        "gyro", np.linalg.inv(Rg) @ np.linalg.inv(Kg), bg, input_units=d.get("from_gyr_unit"),
+        output_units=d.get("gyr_unit"), source=source, g_sensitivity=Kga,
     )  # fmt: skip
-    return _checked(c, source)
+    out["gyro"] = _checked(gyro, source)
+    return out
 
 
 def _yaml_list(text: str, key: str) -> np.ndarray | None:

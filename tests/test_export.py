@@ -202,10 +202,10 @@ def test_marg_magnetometer_correction_is_in_the_accelerometer_frame():
 
 def test_published_imucal_calibration_applied_to_its_session(tmp_path, capsys):
     """imucal's published example calibration (its regression snapshot) applied by
-    ``calib-jax apply`` to the raw session it was computed from: the output equals imucal's
-    equation R_a^-1 K_a^-1 (raw - b_a) to 1e-11 (12 digits written), |a| on the six faces is
-    9.81 m/s^2 within 0.5 % (raw: 1992-2139 a.u.), streamed and whole-file outputs are the
-    same bytes, and the unapplied gyroscope calibration is named."""
+    ``calib-jax apply`` to the raw session it was computed from: both triads equal imucal's own
+    ``calibrate`` (R_a^-1 K_a^-1 (raw - b_a); R_g^-1 K_g^-1 (raw - K_ga a - b_g) with the
+    calibrated a) to 1e-11 (12 digits written), |a| on the six faces is 9.81 m/s^2 within
+    0.5 % (raw: 1992-2139 a.u.), and streamed and whole-file outputs are the same bytes."""
     cal, log = (
         shared_file("imucal_ferraris/example_cal.json"),
         shared_file("imucal_ferraris/annotated_session.csv"),
@@ -213,18 +213,22 @@ def test_published_imucal_calibration_applied_to_its_session(tmp_path, capsys):
     out, out2 = tmp_path / "whole.csv", tmp_path / "streamed.csv"
     assert main(["apply", str(cal), str(log), "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "gyroscope calibration" in said and "not applied" in said
+    assert "corrected gyro: x = C (raw - b - G a)" in said and "not applied" not in said
     assert main(["apply", str(cal), str(log), "--out", str(out2), "--chunk-rows", "700"]) == 0
     assert "streamed in chunks" in capsys.readouterr().out
     assert out.read_bytes() == out2.read_bytes()
 
     d = json.loads(cal.read_text())
-    raw = load_log(log).acc
-    ref = (raw - d["b_a"]) @ (np.linalg.inv(d["R_a"]) @ np.linalg.inv(d["K_a"])).T
+    raw = load_log(log)
+    ref = (raw.acc - d["b_a"]) @ (np.linalg.inv(d["R_a"]) @ np.linalg.inv(d["K_a"])).T
     got = load_log(out)
     assert len(got) == len(raw) == 9414
     assert _rel(got.acc, ref) < 1e-11
-    np.testing.assert_array_equal(got.gyro, load_log(log).gyro)  # passed through
+    imucal = pytest.importorskip("imucal")
+    info = imucal.CalibrationInfo.from_json_file(cal)
+    acc_ref, gyr_ref = info.calibrate(raw.acc, raw.gyro, acc_unit="a.u.", gyr_unit="a.u.")
+    assert _rel(got.acc, acc_ref) < 1e-11
+    assert _rel(got.gyro, gyr_ref) < 1e-11
     part = np.loadtxt(log, delimiter=",", skiprows=1, usecols=0, dtype=str)
     for face in ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a"):
         norm = np.linalg.norm(got.acc[part == face].mean(axis=0))
@@ -311,3 +315,79 @@ def test_every_json_writes_both_linear_forms(make, tmp_path):
     np.testing.assert_allclose(true @ A.T + b, raw, rtol=1e-12)
     cal.save(tmp_path / "cal.json")
     assert type(cal).load(tmp_path / "cal.json") == cal
+
+
+def _accel_gyro(asymmetry=None):
+    """An accelerometer to m/s^2 and a gyroscope with g-sensitivity G (made-up numbers)."""
+    acc = export.Correction(
+        "accel", np.diag([9.7, 9.9, 9.8]) @ (np.eye(3) + 0.01 * ROT), np.array([0.02, -0.01, 0.03]),
+        input_units="g", output_units="m/s^2", status="ok",
+    )  # fmt: skip
+    gyro = export.Correction(
+        "gyro", 0.0175 * (np.eye(3) + 0.02 * RNG.normal(size=(3, 3))), np.array([0.5, -0.3, 0.1]),
+        input_units="deg/s", output_units="rad/s", status="ok",
+        g_sensitivity=0.01 * RNG.normal(size=(3, 3)), scale_asymmetry=asymmetry,
+    )  # fmt: skip
+    return {"accel": acc, "gyro": gyro}
+
+
+def test_gyro_with_g_sensitivity_in_imucal_and_c_and_refused_elsewhere(tmp_path):
+    """A gyroscope with G: imucal's own loader and calibrate give our rates (G as K_ga, the
+    acceleration calibrated first) to 1e-13, and export.read returns C, b and G; the C header
+    takes the acceleration and applies G and the scale asymmetry like Python (float32:
+    2e-6 of the scale); imu_tk and imu_calib, which cannot hold G, refuse with the formats
+    that can."""
+    corr = _accel_gyro()
+    acc_raw, gyr_raw = RAW + [0.0, 0.0, 1.0], 30.0 * RAW
+    acc = corr["accel"].apply(acc_raw)
+    want = corr["gyro"].apply(gyr_raw, acc=acc)
+    assert _rel(want, corr["gyro"].apply(gyr_raw)) > 1e-3  # G matters here
+    path = tmp_path / "cal.json"
+    path.write_text(export.write(corr, "imucal"))
+    imucal = pytest.importorskip("imucal")
+    info = imucal.CalibrationInfo.from_json_file(path)
+    a_imucal, w_imucal = info.calibrate(acc_raw, gyr_raw, acc_unit="g", gyr_unit="deg/s")
+    assert _rel(a_imucal, acc) < 1e-13 and _rel(w_imucal, want) < 1e-13
+    back = export.read(path)
+    np.testing.assert_allclose(back["gyro"].g_sensitivity, corr["gyro"].g_sensitivity, rtol=1e-15)
+    assert _rel(back["gyro"].matrix, corr["gyro"].matrix) < 1e-13
+
+    asym = _accel_gyro(asymmetry=np.array([0.01, -0.02, 0.005]))
+    (tmp_path / "imu_cal.h").write_text(export.write(asym, "c", name="imu"))
+    main_c = """#include <stdio.h>
+#include "imu_cal.h"
+int main(void) {
+    float r[3], a[3], w[3];
+    while (scanf("%f %f %f %f %f %f", &r[0], &r[1], &r[2], &a[0], &a[1], &a[2]) == 6) {
+        imu_gyro_correct(r, a, w);
+        printf("%.9g %.9g %.9g\\n", w[0], w[1], w[2]);
+    }
+    return 0;
+}
+"""
+    flags = ["-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", f"-I{tmp_path}"]
+    exe = _compile(tmp_path, "gyro.c", main_c, "gcc", flags)
+    out = _run(exe, stdin=np.hstack([gyr_raw, acc]))
+    g = asym["gyro"]
+    scale = np.linalg.norm(g.matrix, 2) * np.linalg.norm(gyr_raw - g.bias, axis=1)[:, None]
+    assert np.all(np.abs(out - g.apply(gyr_raw, acc=acc)) <= 2e-6 * scale)
+    for fmt in ("imu_tk", "ros"):
+        with pytest.raises(ValueError, match="g-sensitivity G.*cannot hold.*imucal"):
+            export.write(corr, fmt, sensor="gyro")
+    with pytest.raises(ValueError, match="scale asymmetry s.*cannot hold"):
+        export.write(asym, "imucal")
+
+
+def test_apply_removes_g_sensitivity_with_the_corrected_acceleration(tmp_path):
+    """calib-jax apply with an accelerometer and a gyroscope: G a uses the corrected
+    acceleration of the same rows (in m/s^2); a gyroscope alone says G was not applied."""
+    from calib_jax.io.files import SensorLog
+
+    corr = _accel_gyro()
+    log = SensorLog(acc=RAW + [0.0, 0.0, 1.0], gyro=30.0 * RAW, path="board.csv")
+    both = apply_calibration(corr, log)
+    acc = corr["accel"].apply(log.acc)
+    np.testing.assert_allclose(both.gyro, corr["gyro"].apply(log.gyro, acc=acc), rtol=1e-14)
+    alone = apply_calibration({"gyro": corr["gyro"]}, log)
+    np.testing.assert_allclose(alone.gyro, corr["gyro"].apply(log.gyro), rtol=1e-14)
+    assert any("g-sensitivity G is not applied" in n for n in alone.notes)
