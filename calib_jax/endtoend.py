@@ -30,8 +30,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .align import align_mag_to_accel
+from .filter import FilterGains, complementary_filter
 from .lm import LMResult, lm_solve
-from .models.accel import alpha_matrix
+from .models.accel import AccelParams, alpha_matrix
+from .models.gyro import GyroParams
 from .padding import bucket, pad_rows
 from .pipeline import (
     MagParams,
@@ -162,7 +164,6 @@ def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
     m = np.asarray(fit.params.apply(jnp.asarray(mag)))  # NaN rows stay NaN; align drops them
     al = align_mag_to_accel(acc, m, search_permutations=False)
     rot = Rotation(jnp.asarray(_rotvec(al.R_acc_from_mag)))
-    from .models.accel import AccelParams
 
     params = MargParams(AccelParams.identity(), fit.params, rot)
     cov = block_covariance(
@@ -388,3 +389,238 @@ def compare(fit: dict, test: dict, *, sample_rate: float, offsets: bool = False)
             }
         out[name] = row
     return {"methods": out, "two_stage_alignment": start.alignment_status, "start": start}
+
+
+# ---------------------------------------------------------------------------------------------
+# all three sensors through the gyro-aided filter
+
+
+# The filter's adjusted parameters, blocks in this order (each fitted or held at its start):
+#   accel (9):  paper 1's vector [gains, non-orthogonality, bias]
+#   mag (12):   as the calibration block above (hard iron, symmetric soft iron, mag -> acc)
+#   gyro (12):  C row by row (true rate = C (raw - b)), then the bias b
+#   offset (4): the reference's constant body rotation and heading offset, as above
+#   delay (1):  seconds by which the reference runs ahead of the sensors (read at t - delay)
+FILTER_BLOCKS = (("accel", 9), ("mag", 12), ("gyro", 12), ("offset", 4), ("delay", 1))
+
+
+class MargGyroParams(eqx.Module):
+    """A whole MARG board: accelerometer, magnetometer (with its rotation into the
+    accelerometer's frame) and gyroscope (in the accelerometer's frame through its C)."""
+
+    marg: MargParams
+    gyro: GyroParams
+
+
+def filter_pack(params: MargGyroParams) -> jax.Array:
+    """The accel, mag and gyro blocks (33,) of ``params``."""
+    p = params
+    return jnp.concatenate(
+        [p.marg.acc.to_vector(), pack(p.marg, 0.0)[:12], p.gyro.matrix.ravel(), p.gyro.bias]
+    )
+
+
+def filter_unpack(theta: jax.Array) -> MargGyroParams:
+    """The first 33 entries of a filter parameter vector -> MargGyroParams."""
+    acc = AccelParams.from_vector(theta[:9])
+    marg = unpack(theta[9:21], MargParams(acc, MagParams.identity(), Rotation.identity()))
+    zero = jnp.zeros((3, 3), theta.dtype)
+    gyro = GyroParams(theta[21:30].reshape(3, 3), theta[30:33], zero, zero[0])
+    return MargGyroParams(marg, gyro)
+
+
+def filter_attitude(
+    params: MargGyroParams,
+    gyro,
+    acc,
+    mag,
+    dt,
+    *,
+    g: float | jax.Array,
+    gains: FilterGains | None = None,
+) -> jax.Array:
+    """The filter's attitude (N, 4) from raw readings through ``params``: calibrated rates,
+    acceleration and the field in the accelerometer's frame (unit field), TRIAD start.
+    ``g``: the calibrated accelerometer's gravity magnitude (the filter's weight reference).
+    Default gains: :class:`calib_jax.filter.FilterGains` without the integral term (the gyro
+    bias is a calibration parameter here)."""
+    gains = FilterGains(k_bias=0.0) if gains is None else gains
+    a, m = params.marg.apply(acc, mag)
+    q, _ = complementary_filter(params.gyro.apply(gyro), a, m, dt, gains=gains, g=g, field=1.0)
+    return q
+
+
+def delayed_reference(q_ref: jax.Array, w: jax.Array, delay_samples: jax.Array):
+    """(q, w): the reference read ``delay_samples`` earlier (fractional: normalised linear
+    interpolation between neighbours, differentiable in the delay) and its weights (zero
+    where either neighbour has weight zero or lies outside the log)."""
+    n = q_ref.shape[0]
+    x = jnp.arange(n, dtype=q_ref.dtype) - delay_samples
+    i0 = jnp.clip(jnp.floor(x).astype(jnp.int32), 0, n - 2)
+    f = (x - i0)[:, None]
+    a, b = q_ref[i0], q_ref[i0 + 1]
+    b = jnp.where(jnp.sum(a * b, axis=1, keepdims=True) < 0, -b, b)
+    q = (1.0 - f) * a + f * b
+    inside = (x >= 0) & (x <= n - 1)
+    return q / jnp.linalg.norm(q, axis=1, keepdims=True), jnp.where(inside, w[i0] * w[i0 + 1], 0.0)
+
+
+def _filter_residual(theta, args):
+    """Attitude residuals of the filter, two scale rows (the filter sees the directions of a
+    and m, their magnitudes only through its weights: mean calibrated |a| held at g and |m|
+    at 1 while fitted) and the pinning rows of the held parameters (as in :func:`_residual`)."""
+    default, free, gyro, acc, mag, dt, q_ref, w, g = args
+    t = jnp.where(free, theta, default)
+    p = filter_unpack(t)
+    q = filter_attitude(p, gyro, acc, mag, dt, g=g)
+    q_ref, w = delayed_reference(q_ref, w, t[37] / dt[0])
+    e = rotation_residual(q, offset_reference(q_ref, t[33:37])) * jnp.sqrt(w)[:, None]
+    sw = jnp.sum(w)
+
+    def mean_norm(v):
+        return jnp.sum(w * jnp.linalg.norm(v, axis=1)) / sw
+
+    rows = jnp.stack(
+        [
+            jnp.where(free[0], (mean_norm(p.marg.acc.apply(acc)) / g - 1.0) * jnp.sqrt(sw), 0.0),
+            jnp.where(free[9], (mean_norm(p.marg.mag.apply(mag)) - 1.0) * jnp.sqrt(sw), 0.0),
+        ]
+    )
+    return jnp.concatenate([e.ravel(), rows, jnp.where(free, 0.0, theta - t)])
+
+
+@dataclass(frozen=True)
+class FilterEndToEnd:
+    params: MargGyroParams
+    offset: np.ndarray
+    """[body rotation vector (3, rad), heading offset (rad)] of the reference."""
+    delay_s: float
+    """Seconds by which the reference runs ahead of the sensors."""
+    result: LMResult
+    """The LM fit over the fitted blocks (see :data:`FILTER_BLOCKS`)."""
+    fitted: tuple[str, ...]
+    g: float
+
+
+def end_to_end_filter(
+    gyro: np.ndarray,
+    acc: np.ndarray,
+    mag: np.ndarray,
+    quat_ref: np.ndarray,
+    dt: float,
+    start: MargGyroParams,
+    *,
+    weights: np.ndarray | None = None,
+    fit: tuple[str, ...] = ("accel", "mag", "gyro"),
+    max_iter: int = 30,
+) -> FilterEndToEnd:
+    """Calibrate the blocks in ``fit`` (of :data:`FILTER_BLOCKS`) so that the gyro-aided
+    filter's attitude matches ``quat_ref`` ([w, x, y, z], body -> ENU; non-finite rows left
+    out) in least squares, from ``start``: LM with exact Jacobians, forward mode through the
+    filter's ``lax.scan``. The readings must be finite (the filter integrates every sample)."""
+    gyro, acc, mag, quat_ref = (np.asarray(x, float) for x in (gyro, acc, mag, quat_ref))
+    bad = ~np.all(np.isfinite(np.hstack([gyro, acc, mag])), axis=1)
+    if bad.any():
+        raise ValueError(
+            f"{int(bad.sum())} rows hold NaN or inf in the gyro, accelerometer or magnetometer: "
+            "the filter integrates every sample; cut or fill them first"
+        )
+    unknown = set(fit) - {name for name, _ in FILTER_BLOCKS}
+    if unknown or not fit:
+        raise ValueError(f"fit must name some of {[n for n, _ in FILTER_BLOCKS]}, got {fit}")
+    ok = np.all(np.isfinite(quat_ref), axis=1)
+    if ok.sum() < 50:
+        raise ValueError(f"only {int(ok.sum())} samples have a finite reference attitude")
+    w = np.where(ok, 1.0 if weights is None else np.asarray(weights, float), 0.0)
+    q_ref = np.where(ok[:, None], quat_ref, np.array([1.0, 0, 0, 0]))
+    q_ref = q_ref / np.linalg.norm(q_ref, axis=1, keepdims=True)
+    # padded at the end with zero steps and weights: the filter's earlier output is unchanged
+    size = bucket(len(w))
+    gyro, acc, mag, q_ref = (pad_rows(a, size)[0] for a in (gyro, acc, mag, q_ref))
+    steps = np.zeros(size)
+    steps[: len(w)] = dt
+    w = np.concatenate([w, np.zeros(size - len(w))])
+    g = float(
+        np.median(
+            np.linalg.norm(np.asarray(start.marg.acc.apply(jnp.asarray(acc[: len(ok)]))), axis=1)
+        )
+    )
+    default = jnp.concatenate([filter_pack(start), jnp.zeros(5)])
+    free = np.concatenate([np.full(n, name in fit) for name, n in FILTER_BLOCKS])
+    args = (default, jnp.asarray(free)) + tuple(
+        jnp.asarray(a) for a in (gyro, acc, mag, steps, q_ref, w)
+    )
+    dof = 3 * int(ok.sum()) + int("accel" in fit) + int("mag" in fit) - int(free.sum())
+    full = _run_filter(default, args + (g,), max_iter, float(dof))
+    t = jnp.asarray(full.params)
+    params = filter_unpack(t)
+    return FilterEndToEnd(params, np.asarray(t[33:37]), float(t[37]), _restrict(full, free), fit, g)
+
+
+@functools.partial(jax.jit, static_argnames=("max_iter",))
+def _run_filter(theta0, args, max_iter, dof):
+    return lm_solve(_filter_residual, theta0, args, max_iter=max_iter, dof=dof)
+
+
+def evaluate_filter(
+    params: MargGyroParams,
+    g: float,
+    trial: dict,
+    dt: float,
+    mask: np.ndarray,
+    offset: np.ndarray | None = None,
+    delay_s: float = 0.0,
+) -> dict[str, float]:
+    """RMS and median heading and inclination error (deg) of the filter's attitude over the
+    samples in ``mask`` of ``trial`` (``gyro``, ``acc``, ``mag``, ``quat``), against the
+    reference corrected by ``offset`` and read ``delay_s`` earlier (as fitted)."""
+    q = filter_attitude(params, *(jnp.asarray(trial[k]) for k in ("gyro", "acc", "mag")), dt, g=g)
+    ref = np.asarray(trial["quat"], float)
+    ok = np.all(np.isfinite(ref), axis=1)
+    ref = np.where(ok[:, None], ref, np.array([1.0, 0, 0, 0]))
+    ref = jnp.asarray(ref / np.linalg.norm(ref, axis=1, keepdims=True))
+    ref, w = delayed_reference(ref, jnp.asarray(ok, float), jnp.asarray(delay_s / dt))
+    if offset is not None:
+        ref = offset_reference(ref, jnp.asarray(offset))
+    k = np.asarray(mask, bool) & (np.asarray(w) > 0)
+    e = np.asarray(attitude_errors(q, ref))[k]
+    return {
+        "n": int(k.sum()),
+        "heading_rms": float(np.sqrt(np.mean(e[:, 0] ** 2))),
+        "inclination_rms": float(np.sqrt(np.mean(e[:, 1] ** 2))),
+        "heading_median": float(np.median(e[:, 0])),
+        "inclination_median": float(np.median(e[:, 1])),
+    }
+
+
+def rest_gyro_bias(acc, gyro, mag, sample_rate: float, min_rest_s: float = 2.0) -> np.ndarray:
+    """The gyro bias (raw units) measured at a log's rests: the accelerometer's static
+    intervals (:func:`calib_jax.static.detect_static`) narrowed to where the gyro is still and
+    the field direction does not turn (:func:`calib_jax.gyro.gyro_still_intervals`: a steady
+    turn about the vertical leaves the accelerometer and the gyro quiet; ``mag`` None skips
+    that test), ``min_rest_s`` or longer. No such rest: a ValueError."""
+    from .gyro import gyro_still_intervals
+    from .static import detect_static
+
+    gyro = np.asarray(gyro, float)
+    found = detect_static(np.asarray(acc, float), sample_rate=sample_rate).intervals
+    found = np.array([[i.start, i.stop] for i in found]).reshape(-1, 2)
+    m = None if mag is None else np.asarray(mag, float)
+    still = gyro_still_intervals(gyro, found, m, sample_rate)
+    still = still[still[:, 1] - still[:, 0] >= min_rest_s * sample_rate]
+    if len(still) == 0:
+        raise ValueError(
+            f"no rest of {min_rest_s:g} s or longer in this log: the gyro bias needs one (hold "
+            "the sensor still for a few seconds, or give the bias)"
+        )
+    return np.concatenate([gyro[s:e] for s, e in still]).mean(axis=0)
+
+
+def filter_start(acc, gyro, mag, sample_rate: float, min_rest_s: float = 2.0) -> MargGyroParams:
+    """The two-stage start of :func:`end_to_end_filter`: the accelerometer as given, the
+    magnetometer by :func:`two_stage` (ellipsoid to the unit sphere, then the accel-mag
+    rotation), the gyro C = I (rad/s as read) with the bias of :func:`rest_gyro_bias`."""
+    bias = rest_gyro_bias(acc, gyro, mag, sample_rate, min_rest_s)
+    zero = jnp.zeros((3, 3))
+    gyro_params = GyroParams(jnp.eye(3), jnp.asarray(bias), zero, zero[0])
+    return MargGyroParams(two_stage(acc, mag).params, gyro_params)

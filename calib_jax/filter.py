@@ -44,7 +44,7 @@ def _weight(v, ref, tol):
     return jnp.exp(-(((jnp.linalg.norm(v) / ref - 1.0) / tol) ** 2))
 
 
-def _step(gains: FilterGains, g: float, field: float, carry, sample):
+def _step(gains: FilterGains, g: float | jax.Array, field: float | jax.Array, carry, sample):
     q, b = carry
     w, a, m, dt = sample
     C = quat_to_dcm(q)
@@ -69,8 +69,8 @@ def complementary_filter(
     dt: ArrayLike,
     *,
     gains: FilterGains | None = None,
-    g: float | None = None,
-    field: float | None = None,
+    g: float | jax.Array | None = None,
+    field: float | jax.Array | None = None,
     q0: ArrayLike | None = None,
     bias0: ArrayLike | None = None,
 ) -> tuple[jax.Array, jax.Array]:
