@@ -927,14 +927,15 @@ class BatchRecord(Record):
     Each entry is a dict: ``path`` (the log, or the sensor's name or index), ``status`` (a
     :data:`calib_jax.status.FIT_STATUSES` word), ``solver_status``, ``message``, ``params``
     (paper 1's nine for an accelerometer, the ellipsoid's centre and W row-major for a
-    magnetometer; empty when nothing was fitted), ``stderr``, ``rms``, ``iterations``,
+    magnetometer, C row-major and b for a gyroscope, whose entries add ``g_sensitivity`` and
+    ``scale_asymmetry``; empty when nothing was fitted), ``stderr``, ``rms``, ``iterations``,
     ``n_points`` and what the way in found (units, g, static intervals, notes).
     """
 
     kind: ClassVar[str] = "batch"
     what: ClassVar[str] = "a batch of calibrations"
     sensor: str
-    """'accel' or 'mag'."""
+    """'accel', 'mag' or 'gyro'."""
     entries: list[dict]
     format_version: int = FORMAT_VERSION
 
@@ -951,11 +952,13 @@ class BatchRecord(Record):
         return np.array([is_usable(s) for s in self.statuses], bool)
 
     def to_params(self) -> dict:
-        """``{path: pytree}`` for every usable entry: :class:`calib_jax.pipeline.AccelParams` or
-        :class:`calib_jax.pipeline.MagParams` (JAX is imported here)."""
+        """``{path: pytree}`` for every usable entry: :class:`calib_jax.pipeline.AccelParams`,
+        :class:`calib_jax.pipeline.MagParams` or :class:`calib_jax.pipeline.GyroParams` (JAX
+        is imported here)."""
         import jax.numpy as jnp
 
         from .models.accel import AccelParams
+        from .models.gyro import GyroParams
         from .pipeline import MagParams
 
         out = {}
@@ -965,6 +968,10 @@ class BatchRecord(Record):
             p = jnp.asarray(e["params"], jnp.float64)
             if self.sensor == "accel":
                 out[e["path"]] = AccelParams.from_vector(p)
+            elif self.sensor == "gyro":
+                G = jnp.asarray(e.get("g_sensitivity") or np.zeros(9), jnp.float64)
+                s = jnp.asarray(e.get("scale_asymmetry") or np.zeros(3), jnp.float64)
+                out[e["path"]] = GyroParams(p[:9].reshape(3, 3), p[9:], G.reshape(3, 3), s)
             else:
                 out[e["path"]] = MagParams.from_vector(p)
         return out
@@ -1022,12 +1029,14 @@ class BatchRecord(Record):
         _check_version(r.d, r.where)
         cls._check_kind(r.d, r.where)
         sensor = r.text("sensor")
-        if sensor not in ("accel", "mag"):
-            raise ValueError(f"{r.where}key 'sensor' must be 'accel' or 'mag', got {sensor!r}")
+        if sensor not in ("accel", "mag", "gyro"):
+            raise ValueError(
+                f"{r.where}key 'sensor' must be 'accel', 'mag' or 'gyro', got {sensor!r}"
+            )
         results = r.get("results")
         if not isinstance(results, list) or not all(isinstance(e, dict) for e in results):
             raise ValueError(f"{r.where}key 'results' must be a list of objects")
-        n = 9 if sensor == "accel" else 12
+        n = 9 if sensor == "accel" else 12  # mag: centre and W; gyro: C and b
         for i, e in enumerate(results):
             status, params = e.get("status"), e.get("params") or []
             if status not in FIT_STATUSES:

@@ -290,6 +290,8 @@ def run_batch(args: argparse.Namespace) -> int:
     options = {}
     if args.sensor == "accel":
         options.update(g=args.g, model=args.model or "accel9")
+    elif args.sensor == "gyro":
+        options.update(g=args.g)  # each log's accelerometer, fitted first
     else:
         options.update(field=args.field, model=args.model or "full")
     print(f"calib-jax batch: {len(paths)} files under {root}, sensor {args.sensor}")
@@ -664,7 +666,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("dir")
     b.add_argument("--pattern", default="*.csv", help="file glob, searched recursively")
-    b.add_argument("--sensor", default="accel", choices=["accel", "mag"])
+    b.add_argument(
+        "--sensor",
+        default="accel",
+        choices=["accel", "mag", "gyro"],
+        help="gyro: each log through calib-jax gyro's fit (poses with turns, a time column or "
+        "--sample-rate); rms is then the miss between poses in degrees",
+    )
     b.add_argument("--model", default=None, help="accel9|accel6 or sphere|diag|full")
     b.add_argument(
         "--g",

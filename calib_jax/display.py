@@ -181,9 +181,12 @@ def diagnosis_html(d) -> str:
 
 
 def param_names(sensor: str) -> list[str]:
-    """The batch parameter vector's names: paper 1's nine, or the ellipsoid's centre and W."""
+    """The batch parameter vector's names: paper 1's nine, the ellipsoid's centre and W, or
+    the gyroscope's C and b."""
     if sensor == "accel":
         return list(PARAM_NAMES)
+    if sensor == "gyro":
+        return [f"C_{r}{c}" for r in "xyz" for c in "xyz"] + [f"b_{a}" for a in "xyz"]
     return [f"center_{a}" for a in "xyz"] + [f"W_{r}{c}" for r in "xyz" for c in "xyz"]
 
 
@@ -199,7 +202,8 @@ def fleet_rows(results, sensor: str | None = None) -> list[dict]:
         names = param_names(sens) if n else []
         row.update(zip(names, r.get("params") or [], strict=False))
         row.update({f"se_{k}": v for k, v in zip(names, r.get("stderr") or [], strict=False)})
-        for k in ("rms", "iterations", "n_points", "static_intervals", "units", "g", "use"):
+        keys = ("rms", "rms_before_deg", "noise_floor_deg", "iterations", "n_points")
+        for k in (*keys, "static_intervals", "units", "g", "use"):
             if k in r:
                 row[k] = r[k]
         row["notes"] = "; ".join(r.get("notes") or [])

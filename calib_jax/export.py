@@ -187,10 +187,11 @@ def _gyro(g) -> Correction:
     )
 
 
-def correction_from_result(r: dict) -> Correction:
+def correction_from_result(r: dict, sensor: str | None = None) -> Correction:
     """The correction of one fleet result (:func:`calib_jax.fleet.calibrate_files`, or an entry
     of ``calib-jax batch --json``): 9 parameters are paper 1's accelerometer vector, 12 the
-    ellipsoid's centre and W (row-major). A ValueError for a file that was not calibrated."""
+    ellipsoid's centre and W (row-major), or with ``sensor="gyro"`` C (row-major) and b. A
+    ValueError for a file that was not calibrated."""
     if r.get("status") != "ok" or not r.get("params"):
         raise ValueError(
             f"{r.get('path')}: not calibrated ({r.get('status')}: {r.get('message', '')}); "
@@ -198,7 +199,14 @@ def correction_from_result(r: dict) -> Correction:
         )
     p = np.asarray(r["params"], float)
     units = r.get("units")
-    if p.size == 9:
+    if sensor == "gyro" and p.size == 12:
+        G, asym = r.get("g_sensitivity"), r.get("scale_asymmetry")
+        c = Correction(
+            "gyro", p[:9].reshape(3, 3), p[9:], units, "rad/s",
+            g_sensitivity=None if G is None else np.reshape(np.asarray(G, float), (3, 3)),
+            scale_asymmetry=None if asym is None else np.asarray(asym, float),
+        )  # fmt: skip
+    elif p.size == 9:
         out = None if units == "counts" else units  # counts are fitted to the reference g
         c = Correction("accel", np.linalg.inv(p[ALPHA_INDEX]), p[6:9], units, out)
     elif p.size == 12:
@@ -246,7 +254,7 @@ def _from_dict(d: dict, where) -> dict[str, Correction]:
                 f"{where}: a batch of {len(rec)} calibrations; export one entry in Python "
                 "(calib_jax.export.correction_from_result(BatchRecord.load(path).entries[i]))"
             )
-        return {rec.sensor: correction_from_result(rec.entries[0])}
+        return {rec.sensor: correction_from_result(rec.entries[0], rec.sensor)}
     return {"accel": _accel(AccelCalibration.from_dict(d, source=where))}
 
 

@@ -22,7 +22,7 @@ from .io.files import SensorLog, load_log
 from .observations import accel_observations, detector_keywords, screen_samples
 from .padding import bucket
 
-SENSORS = ("accel", "mag")
+SENSORS = ("accel", "mag", "gyro")
 
 
 def prepare_log(
@@ -42,8 +42,8 @@ def prepare_log(
     checks (:func:`calib_jax.accel.check_poses`: a ValueError when the poses cannot determine
     ``model``). Magnetometer: every finite sample off a saturated axis.
     """
-    if sensor not in SENSORS:
-        raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
+    if sensor not in SENSORS[:2]:
+        raise ValueError(f"sensor must be one of {SENSORS[:2]}, got {sensor!r}")
     x = log.vectors(sensor)
     info: dict = {"samples": len(x)}
     if sensor == "mag":
@@ -128,6 +128,8 @@ def _fit_chunk(
     """Prepare and fit one chunk of files (also the Dask task); ``detector`` holds the
     detector options (window, threshold_factor, min_static), converted per log by
     :func:`calib_jax.observations.detector_keywords`."""
+    if sensor == "gyro":
+        return [_gyro_entry(p, columns, options, detector) for p in paths]
     prepared, out = [], []
     for p in paths:
         try:
@@ -136,14 +138,51 @@ def _fit_chunk(
             pts, info = prepare_log(log, sensor, model=options.get("model"), use=use, **found)
             prepared.append((p, pts, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
-            # ValueError/OSError carry a message meant for the user; anything else is a bug in
-            # reading this file, reported with its type instead of aborting the other files
-            known = isinstance(exc, ValueError | OSError)
-            msg = str(exc) if known else f"{type(exc).__name__} while reading {p}: {exc}"
-            out.append({"path": str(p), "status": "load_error", "message": msg})
+            out.append(_load_error(p, exc))
     out += fit_prepared(prepared, sensor, options)
     order = {str(p): k for k, p in enumerate(paths)}
     return sorted(out, key=lambda d: order[d["path"]])
+
+
+def _load_error(p, exc: Exception) -> dict:
+    """The entry of a file that could not be read or prepared: ValueError/OSError carry a
+    message meant for the user; anything else is a bug in reading this file, reported with
+    its type instead of aborting the other files."""
+    known = isinstance(exc, ValueError | OSError)
+    msg = str(exc) if known else f"{type(exc).__name__} while reading {p}: {exc}"
+    return {"path": str(p), "status": "load_error", "message": msg}
+
+
+def _gyro_entry(p, columns, options: dict, detector: dict | None) -> dict:
+    """One gyro log through :func:`calib_jax.calibrate_gyro` (the same fit, candidate effects
+    and checks as ``calib-jax gyro``; its compiled parts are shared by every log of a padded
+    shape): the batch entry, with C row by row then b as ``params`` and the miss between
+    poses in degrees as ``rms``."""
+    from .gyro import calibrate_gyro
+
+    try:
+        log = load_log(p, columns=columns)
+        found = detector_keywords(sample_rate=log.sample_rate, **(detector or {}))
+        cal = calibrate_gyro(log, accel_options={"g": options.get("g"), **found})
+    except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
+        return _load_error(p, exc)
+    return {
+        "path": str(p),
+        "status": cal.status,
+        "solver_status": cal.solver_status,
+        "message": cal.solver_message,
+        "params": [*np.ravel(cal.matrix), *cal.bias],
+        "stderr": [*np.ravel(cal.stderr_matrix), *cal.stderr_bias],
+        "rms": cal.rms_after_deg,
+        "rms_before_deg": cal.rms_before_deg,
+        "noise_floor_deg": cal.noise_floor_deg,
+        "iterations": cal.iterations,
+        "n_points": cal.n_motions,
+        "units": cal.input_units,
+        "g_sensitivity": np.ravel(cal.g_sensitivity).tolist(),
+        "scale_asymmetry": list(cal.scale_asymmetry),
+        "notes": cal.warnings + cal.notes,
+    }
 
 
 def _chunks(items: list, size: int) -> Iterator[list]:

@@ -391,3 +391,35 @@ def test_pipeline_fit_gyro_is_calibrate_gyro_differentiated_and_vmapped(sim):
     for i, single in enumerate((fit, pl.fit_gyro(inputs2))):
         se = np.asarray(single.stderr[:9]).reshape(3, 3)
         assert np.abs((both.params.matrix[i] - single.params.matrix) / se).max() < 1e-9
+
+
+def test_batch_of_gyro_logs_is_calibrate_gyro_per_file(sim, tmp_path, capsys):
+    """calib-jax batch --sensor gyro: each log gets calibrate_gyro's parameters (the same
+    code, compared to 1e-12), a log without gyro columns gets its error and does not stop the
+    others, and the JSON loads as a BatchRecord whose pytrees apply like the records."""
+    from calib_jax.calibration import BatchRecord
+    from calib_jax.io.files import load_log
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name, s in (("a", sim), ("b", simulate_gyro_log(6, n_poses=12))):
+        table = np.column_stack([s.t, s.acc, s.gyro])
+        np.savetxt(logs / f"{name}.csv", table, delimiter=",", header="t,ax,ay,az,gx,gy,gz",
+                   comments="")  # fmt: skip
+    np.savetxt(logs / "c.csv", np.column_stack([sim.t, sim.acc]), delimiter=",",
+               header="t,ax,ay,az", comments="")  # fmt: skip
+    out, tab = tmp_path / "fleet.json", tmp_path / "fleet.csv"
+    rc = main(["batch", str(logs), "--sensor", "gyro", "--json", str(out), "--table", str(tab)])
+    text = capsys.readouterr().out
+    assert rc == 1 and "2 of 3 calibrated" in text and "no gyro columns" in text
+    rec = BatchRecord.load(out)
+    assert rec.sensor == "gyro" and rec.statuses == ["ok", "ok", "load_error"]
+    one = calibrate_gyro(load_log(logs / "a.csv"))
+    e = rec.entries[0]
+    np.testing.assert_allclose(e["params"][:9], one.matrix.ravel(), rtol=1e-12)
+    np.testing.assert_allclose(e["params"][9:], one.bias, rtol=1e-12)
+    assert e["rms"] == pytest.approx(one.rms_after_deg, rel=1e-12)
+    p = rec.to_params()[str(logs / "a.csv")]
+    np.testing.assert_allclose(p.apply(jnp.asarray(sim.gyro[:20])), one.apply(sim.gyro[:20]),
+                               rtol=1e-12)  # fmt: skip
+    assert "C_xy" in tab.read_text().splitlines()[0]
