@@ -743,7 +743,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--delimiter", default="auto", choices=["auto", "comma", "tab", "semicolon", "space"]
     )
     r.add_argument("--out", required=True, help="log file (several ports: FILE.devK.csv)")
-    r.add_argument("--sensor", default="accel", choices=["accel", "mag", "marg"])
+    r.add_argument("--sensor", default="accel", choices=["accel", "mag", "marg", "gyro"])
     r.add_argument("--seconds", type=_pos_float, default=None, help="stop after this long")
     r.add_argument("--resume", action="store_true", help="append to an existing log")
     r.add_argument("--overwrite", action="store_true", help="replace an existing log")

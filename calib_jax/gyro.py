@@ -556,17 +556,38 @@ def _unscaled(res, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return C, cov, stderr
 
 
-def _check_turn_axes(g: np.ndarray) -> None:
-    """A ValueError naming the axes no turn in the log went about (their columns of C cannot
-    be fitted). The turns are the samples more than 5 noise levels from the median reading
-    (the log is mostly at rest); their second moment sum (g - med)(g - med)' has an
-    eigenvalue near zero, below 1e-3 of the largest, for each raw axis nothing turned about."""
+def _turning(g: np.ndarray) -> np.ndarray:
+    """The readings of the turns, less the median reading: the samples more than 5 noise
+    levels from the median (a pose log is mostly at rest)."""
     dev = g - np.median(g, axis=0)
     size = np.linalg.norm(dev, axis=1)
-    moving = size > 5.0 * 1.4826 * np.median(size) + 1e-300
-    if moving.sum() < 10:
+    return dev[size > 5.0 * 1.4826 * np.median(size) + 1e-300]
+
+
+TURN_SHARE_MIN = 0.2
+"""A raw axis whose RMS rate during the turns is below this share of the largest axis's has
+hardly been turned about (guidance while recording; the fit's own test is stricter)."""
+
+
+def turn_axes_missing(g: np.ndarray) -> list[str]:
+    """The gyro axes ('x', 'y', 'z') hardly turned about so far (:data:`TURN_SHARE_MIN`); all
+    three when nothing has turned yet. For the recorder's guidance."""
+    dev = _turning(np.asarray(g, float))
+    if len(dev) < 10:
+        return ["x", "y", "z"]
+    rms = np.sqrt(np.mean(dev**2, axis=0))
+    return [a for a, r in zip("xyz", rms, strict=True) if r < TURN_SHARE_MIN * rms.max()]
+
+
+def _check_turn_axes(g: np.ndarray) -> None:
+    """A ValueError naming the axes no turn in the log went about (their columns of C cannot
+    be fitted). The turns are :func:`_turning`'s samples; their second moment sum
+    (g - med)(g - med)' has an eigenvalue near zero, below 1e-3 of the largest, for each raw
+    axis nothing turned about."""
+    dev = _turning(g)
+    if len(dev) < 10:
         return  # nothing turned at all: the motion count says so
-    evals, evecs = np.linalg.eigh(dev[moving].T @ dev[moving])
+    evals, evecs = np.linalg.eigh(dev.T @ dev)
     weak = [i for i in range(3) if evals[i] < 1e-3 * evals[-1]]
     if not weak:
         return

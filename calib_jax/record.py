@@ -10,7 +10,9 @@ each device's accumulated accelerometer data and reports what paper 1's protocol
   degrees; the accelerometer reads the upward specific force);
 * octants of the sphere of directions no pose has visited yet;
 * for a magnetometer, the share of the sphere of field directions covered
-  (:func:`calib_jax.sphere.sphere_coverage`, 100 equal-area cells) and the faces not yet seen.
+  (:func:`calib_jax.sphere.sphere_coverage`, 100 equal-area cells) and the faces not yet seen;
+* for a gyroscope (``gyro``, or ``marg`` with gyro columns), the axes hardly turned about yet
+  (:func:`calib_jax.gyro.turn_axes_missing`): its fit needs turns about all three.
 
 With ``resume``, the rows already in a log count towards its coverage (they are calibrated
 too). A log this session wrote nothing into is not calibrated as if it were this session's.
@@ -36,7 +38,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +54,7 @@ MAG_TARGET = 0.7
 """Share of the sphere of field directions a magnetometer session should cover (calibrate_mag
 warns below 0.5)."""
 FACE_COS = np.cos(np.deg2rad(45.0))
-SENSORS = ("accel", "mag", "marg")
+SENSORS = ("accel", "mag", "marg", "gyro")
 _FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
@@ -113,10 +115,17 @@ class Coverage:
     """Share of the sphere of field directions covered (magnetometer)."""
     mag_target: float = MAG_TARGET
     mag_faces_missing: list[str] = field(default_factory=list)
+    turn_axes_missing: list[str] | None = None
+    """Gyro axes hardly turned about yet (:func:`calib_jax.gyro.turn_axes_missing`); None when
+    no gyro is recorded."""
 
     @property
     def uses_accel(self) -> bool:
-        return self.sensor in ("accel", "marg")
+        return self.sensor in ("accel", "marg", "gyro")
+
+    @property
+    def uses_gyro(self) -> bool:
+        return self.turn_axes_missing is not None
 
     @property
     def uses_mag(self) -> bool:
@@ -133,6 +142,8 @@ class Coverage:
             )
         if self.uses_mag:
             ok &= (self.mag_fraction or 0.0) >= self.mag_target and not self.mag_faces_missing
+        if self.uses_gyro:
+            ok &= not self.turn_axes_missing
         return bool(ok)
 
     def missing(self) -> str:
@@ -150,6 +161,13 @@ class Coverage:
                 parts.append("field never along " + ", ".join(self.mag_faces_missing))
             if (self.mag_fraction or 0.0) < self.mag_target:
                 parts.append("tumble through more orientations")
+        if self.turn_axes_missing:
+            parts.append(
+                "no turn about the gyro's "
+                + ", ".join(self.turn_axes_missing)
+                + f" ax{'i' if len(self.turn_axes_missing) == 1 else 'e'}s yet (between poses, "
+                "turn the board about each of its axes)"
+            )
         return "; ".join(parts)
 
     def line(self) -> str:
@@ -169,6 +187,7 @@ class Coverage:
 def assess_coverage(
     acc: np.ndarray | None,
     mag: np.ndarray | None,
+    gyro: np.ndarray | None = None,
     *,
     sensor: str = "accel",
     sample_rate: float | None = None,
@@ -184,7 +203,12 @@ def assess_coverage(
     n = max(len(acc) if acc is not None else 0, len(mag) if mag is not None else 0)
     kw: dict = {"sensor": sensor, "samples": n, "target_poses": target_poses}
     kw["mag_target"] = mag_target
-    if sensor in ("accel", "marg") and acc is not None and len(acc) >= 8:
+    if sensor == "gyro" or (sensor == "marg" and gyro is not None):
+        from .gyro import turn_axes_missing
+
+        g = np.zeros((0, 3)) if gyro is None else np.asarray(gyro, float)
+        kw["turn_axes_missing"] = turn_axes_missing(g[np.all(np.isfinite(g), axis=1)])
+    if sensor in ("accel", "marg", "gyro") and acc is not None and len(acc) >= 8:
         x = np.asarray(acc, float)
         ok = np.all(np.isfinite(x), axis=1)
         rep = detect_static(
@@ -207,7 +231,7 @@ def assess_coverage(
             faces_missing=_faces_missing(dirs),
             octants_missing=_octants_missing(dirs),
         )
-    elif sensor in ("accel", "marg"):
+    elif sensor in ("accel", "marg", "gyro"):
         kw.update(octants_missing=_octants_missing(np.zeros((0, 3))))
     if sensor in ("mag", "marg") and mag is not None and len(mag) >= 8:
         from .sphere import sphere_coverage
@@ -431,6 +455,7 @@ def _assess(devices, sensor, detector, target_poses, mag_target) -> None:
         dev.coverage = assess_coverage(
             b.acc,
             b.mag,
+            b.gyro,
             sensor=sensor,
             sample_rate=_rate(b.t) if len(b) > 1 else None,
             window=detector.get("window"),
@@ -477,9 +502,11 @@ def calibrate_recording(
     listed under ``"save_errors"``, and the log is left as it is.
 
     ``accel``: :class:`calib_jax.AccelCalibration`; ``mag``: :class:`calib_jax.MagCalibration`;
-    ``marg``: both and, when the data allow it, the magnetometer-to-accelerometer rotation
-    (:func:`calib_jax.align_mag_to_accel`), written as ``.marg.json``: the board's
-    :class:`calib_jax.marg.MARGRecord`, as ``calib-jax marg`` writes it).
+    ``gyro``: :class:`calib_jax.GyroCalibration` (its accelerometer fitted first);
+    ``marg``: the first two and, when the data allow it, the magnetometer-to-accelerometer
+    rotation (:func:`calib_jax.align_mag_to_accel`) and the gyroscope when the log has one,
+    written as ``.marg.json``: the board's :class:`calib_jax.marg.MARGRecord`, as ``calib-jax
+    marg`` writes it).
     """
     from .accel import calibrate_accel
     from .io.files import load_log
@@ -511,9 +538,25 @@ def calibrate_recording(
         wrote = _save(lambda: mcal.save(out["mag"]), out["mag"], errors)
         say(f"magnetometer, {path}:\n{mcal.report()}\n{wrote[2:]}")
         results["mag"] = mcal
+    if sensor == "gyro":
+        from .gyro import calibrate_gyro
+
+        detector = detector_keywords(
+            window=window,
+            threshold_factor=threshold_factor,
+            min_static=min_static if log.sample_rate else None,
+            sample_rate=log.sample_rate,
+        )
+        gcal = calibrate_gyro(
+            log, sensor_id=sensor_id, solver=solver, accel_options={"g": g, **detector}
+        )
+        wrote = _save(lambda: gcal.save(out["gyro"]), out["gyro"], errors)
+        say(f"gyroscope, {path}:\n{gcal.report()}\n{wrote[2:]}")
+        results["gyro"] = gcal
     if sensor == "marg":
         from .align import align_mag_to_accel
-        from .marg import _record
+        from .marg import _gyro_block, _record
+        from .status import worst_status
 
         try:
             al = align_mag_to_accel(results["accel"].apply(log.acc), results["mag"].apply(log.mag))
@@ -521,7 +564,10 @@ def calibrate_recording(
             say(f"no accel-mag rotation: {exc}")
         else:
             warn = [f"alignment: {w}" for w in al.warnings]
+            gyro = _gyro_block(log, results["accel"], "static", warn)
             rec = _record(results["accel"], "static", results["mag"], al, warn, source=str(path))
+            if gyro is not None:
+                rec = replace(rec, gyro=gyro, status=worst_status(rec.status, gyro.status))
             wrote = _save(lambda: rec.save(out["marg"]), out["marg"], errors)
             say(rec.alignment_text() + wrote)
             results["marg"] = rec
@@ -568,8 +614,18 @@ def calibrate_devices(
     results: list[dict] = [
         {"sensor_id": i, "source": str(p)} for i, p in zip(ids, paths, strict=True)
     ]
-    kinds = {"accel": ["accel"], "mag": ["mag"], "marg": ["accel", "mag"]}[sensor]
+    kinds = {"accel": ["accel"], "mag": ["mag"], "marg": ["accel", "mag"], "gyro": ["gyro"]}
+    kinds = kinds[sensor]
     for kind in kinds:
+        if kind == "gyro":  # each log through calibrate_gyro, as calib-jax batch does
+            from .fleet import _gyro_entry
+
+            detector = {"window": window, "threshold_factor": threshold_factor}
+            detector["min_static"] = min_static
+            for i, p in enumerate(paths):
+                entry = _gyro_entry(p, None, {"g": g}, detector)
+                results[i]["gyro"] = {**entry, "sensor_id": ids[i]}
+            continue
         prepared = []
         for i, (lg, p) in enumerate(zip(logs, paths, strict=True)):
             detector = {}
@@ -628,7 +684,7 @@ def _save(write: Callable[[], None], target: Path, errors: list[str]) -> str:
 
 def _batch_line(res: dict) -> str:
     out = []
-    for kind in ("accel", "mag"):
+    for kind in ("accel", "mag", "gyro"):
         e = res.get(kind)
         if e is None:
             continue
@@ -636,6 +692,9 @@ def _batch_line(res: dict) -> str:
             out.append(f"{kind} not calibrated: {e['message']}")
             continue
         p = e["params"]
+        if kind == "gyro":
+            out.append(f"gyro {e['status']} bias {_fmt(p[9:12])} miss {e['rms']:.3g} deg")
+            continue
         what = (
             f"gains {_fmt(p[0:3])} bias {_fmt(p[6:9])}"
             if kind == "accel"
@@ -654,7 +713,7 @@ def session_ok(results: Sequence[dict | object]) -> bool:
     ok = True
     for r in results:
         if isinstance(r, dict):
-            for kind in ("accel", "mag"):
+            for kind in ("accel", "mag", "gyro"):
                 item = r.get(kind)
                 if isinstance(item, dict):
                     ok &= item.get("status") == "ok"
@@ -719,7 +778,7 @@ def run(args) -> int:
                 sensor_id=dev.url,
                 solver=args.solver,
             )
-            ok = session_ok(list(res[k] for k in res if k in ("accel", "mag")))
+            ok = session_ok(list(res[k] for k in res if k in ("accel", "mag", "gyro")))
             ok &= not res.get("save_errors")
         else:
             res = calibrate_devices(
