@@ -466,14 +466,22 @@ def gyro_still_intervals(
 
 
 def _field_turn_deg_s(m: np.ndarray, sample_rate: float) -> float:
-    """How fast the field direction turns over a stretch: the angle between the means of its
-    first and last quarters over the time between their centres (0 when too short)."""
+    """How fast the field direction turns over a stretch: the angle between the mean
+    directions of its first and last quarters over the time between their centres; 0 when
+    too short, or when that angle is within 4 standard errors of the quarters' noise (a short
+    rest's few samples cannot tell a slow turn from noise)."""
     q = len(m) // 4
     if q < 2:
         return 0.0
-    a, b = np.nanmean(m[:q], axis=0), np.nanmean(m[-q:], axis=0)
-    cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))) / ((len(m) - q) / sample_rate)
+    u = m / np.linalg.norm(m, axis=1, keepdims=True)
+    a, b = u[:q], u[-q:]
+    ma, mb = np.nanmean(a, axis=0), np.nanmean(b, axis=0)
+    noise = np.sqrt((np.nansum(np.nanvar(a, axis=0)) + np.nansum(np.nanvar(b, axis=0))) / q)
+    cos = float(ma @ mb / (np.linalg.norm(ma) * np.linalg.norm(mb)))
+    angle = float(np.arccos(np.clip(cos, -1.0, 1.0)))
+    if angle <= 4.0 * noise:
+        return 0.0
+    return float(np.degrees(angle)) / ((len(m) - q) / sample_rate)
 
 
 def _motion_windows(intervals: np.ndarray) -> list[tuple[int, int, int]]:
@@ -512,28 +520,139 @@ def _nested_f_test(rss0: float, rss1: float, extra: int, dof: int) -> tuple[floa
     return float(F), float(f_dist.sf(F, extra, dof))
 
 
-def _g_sensitivity(pose_means: np.ndarray, pose_acc: np.ndarray) -> dict:
-    """Does the rest bias follow the acceleration? The pose means regressed on b + G a (a in
-    m/s^2), against a constant b: an F test of the nine entries of G (accepted at p < 1e-3),
-    and the spread of the pose means about each model."""
+@dataclass(frozen=True)
+class _RestCandidate:
+    """A quantity the rest bias may follow: its value at each pose (P, k) and at any stretch
+    of samples (``of(s, e)`` -> (n, k)), and the words of the report."""
+
+    name: str
+    at_poses: np.ndarray
+    of: object
+    label: str
+    present: str
+    absent: str
+    applied: str
+    unit: str
+    reference: float | None = None
+
+
+def _rest_candidates(log: _PoseLog, accel, to_ms2: float, tt, notes: list) -> list:
+    """The candidates a log allows, in the order they are tested: the acceleration (always),
+    the time, the temperature (with a temperature column that varies)."""
+    iv = log.intervals
+    pose_t = np.array([tt[s:e].mean() for s, e in iv])
+    t0 = float(pose_t.mean())
+    out = [
+        _RestCandidate(
+            "g_sensitivity",
+            log.pose_out * to_ms2,
+            lambda s, e: accel.apply(log.acc[s:e]) * to_ms2,
+            "g-sensitivity",
+            "the rest bias follows the acceleration, b + G a",
+            "at p < 1e-3 the rest bias does not follow the acceleration",
+            "G is applied during the turns and kept in the calibration",
+            "{units} per m/s^2",
+        ),
+        _RestCandidate(
+            "bias_drift",
+            (pose_t - t0)[:, None],
+            lambda s, e: (tt[s:e] - t0)[:, None],
+            "bias drift",
+            "the rest bias drifts over the session, b + d (t - t0)",
+            "at p < 1e-3 the rest bias does not drift over the session",
+            "the drift is removed during this log's turns (it is this session's, not the "
+            "sensor's: it is not applied to other logs)",
+            "{units} per s",
+            t0,
+        ),
+    ]
+    if log.temp is not None:
+        temp = log.temp
+        pose_T = np.array([np.nanmean(temp[s:e]) for s, e in iv])
+        if np.all(np.isfinite(pose_T)) and np.ptp(pose_T) >= 0.1:
+            T0 = float(pose_T.mean())
+            out.append(
+                _RestCandidate(
+                    "temperature",
+                    (pose_T - T0)[:, None],
+                    lambda s, e: (temp[s:e] - T0)[:, None],
+                    "temperature",
+                    "the rest bias follows the temperature, b + k (T - T0)",
+                    "at p < 1e-3 the rest bias does not follow the temperature",
+                    "removed during the turns; the coefficient k is reported, not applied to "
+                    "other logs",
+                    "{units} per deg C",
+                    T0,
+                )
+            )
+        else:
+            notes.append(
+                "temperature not tested: the poses' temperatures span less than 0.1 deg C "
+                "(or hold NaN)"
+            )
+    return out
+
+
+def _design(cands: list, with_intercept: bool = True) -> np.ndarray:
+    """The pose design matrix [1, each candidate's columns]."""
+    cols = [c.at_poses for c in cands]
+    n = len(cands[0].at_poses) if cands else 0
+    if with_intercept:
+        cols = [np.ones((n, 1))] + cols
+    return np.hstack(cols)
+
+
+def _rest_test(pose_means: np.ndarray, accepted: list, cand: _RestCandidate) -> dict:
+    """Does ``cand`` explain the pose means beyond the ``accepted`` candidates? Least squares
+    of the pose means on both designs, a nested F test of the candidate's 3 k coefficients
+    (accepted at p < 1e-3), the spread of the pose means about each model."""
     n = len(pose_means)
-    X = np.column_stack([np.ones(n), pose_acc])
-    coef = np.linalg.lstsq(X, pose_means, rcond=None)[0]
-    rss0 = float(np.sum((pose_means - pose_means.mean(axis=0)) ** 2))
-    resid = pose_means - X @ coef
-    F, p = _nested_f_test(rss0, float(np.sum(resid**2)), 9, 3 * n - 12)
-    if not np.isfinite(F):
-        return {"accepted": False, "F": F, "p": p, "poses": n}
+    X0 = _design(accepted) if accepted else np.ones((n, 1))
+    X1 = _design([*accepted, cand])
+    r0 = pose_means - X0 @ np.linalg.lstsq(X0, pose_means, rcond=None)[0]
+    coef = np.linalg.lstsq(X1, pose_means, rcond=None)[0]
+    r1 = pose_means - X1 @ coef
+    extra = 3 * cand.at_poses.shape[1]
+    F, p = _nested_f_test(float(np.sum(r0**2)), float(np.sum(r1**2)), extra, 3 * (n - X1.shape[1]))
+    # standard errors of every coefficient, per axis: s_j^2 (X'X)^-1 (the pose means taken as
+    # independent, which the F test assumes too)
+    var = np.sum(r1**2, axis=0) / max(n - X1.shape[1], 1)
+    unscaled = np.diag(np.linalg.pinv(X1.T @ X1))
     return {
-        "accepted": bool(p < 1e-3),
         "F": F,
         "p": p,
-        "poses": n,
-        "bias": coef[0],
-        "G": coef[1:].T,
-        "spread_before": pose_means.std(axis=0),
-        "spread_after": resid.std(axis=0),
+        "accepted": bool(p < 1e-3),
+        "coef": coef,
+        "stderr": np.sqrt(np.outer(unscaled, var)),
+        "spread_before": r0.std(axis=0),
+        "spread_after": r1.std(axis=0),
     }
+
+
+def _rest_coefficients(cands: list, coef: np.ndarray) -> dict:
+    """Each candidate's block of the joint coefficients: G (3, 3) for the acceleration, a
+    (3,) vector for the time and the temperature."""
+    blocks = _blocks(cands, coef)
+    return {c.name: b.T if len(b) > 1 else b[0] for c, b in zip(cands, blocks, strict=True)}
+
+
+def _rest_model(g: np.ndarray, cands: list, coef: np.ndarray):
+    """``rates_of(s, e)``: the raw rates less the rest model b + sum of each candidate's
+    coefficients times its value at those samples."""
+
+    def rates_of(s, e):
+        x = g[s:e] - coef[0]
+        for c, block in zip(cands, _blocks(cands, coef), strict=True):
+            x = x - c.of(s, e) @ block
+        return x
+
+    return rates_of
+
+
+def _blocks(cands: list, coef: np.ndarray) -> list:
+    """The rows of the joint coefficients (after the intercept) of each candidate, (k, 3)."""
+    ends = np.cumsum([1] + [c.at_poses.shape[1] for c in cands])
+    return [coef[a:b] for a, b in zip(ends[:-1], ends[1:], strict=True)]
 
 
 def _fit_scaled(motions: Motions, w: np.ndarray, scale: float, solver: str):
@@ -758,6 +877,8 @@ class _PoseLog:
     notes: list
     warn: list
     source: object
+    temp: np.ndarray | None = None
+    """Temperature of each sample (deg C), when the log has it."""
 
     @property
     def rest(self) -> np.ndarray:
@@ -768,7 +889,7 @@ class _PoseLog:
         return self.rest.mean(axis=0)
 
 
-def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
+def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _PoseLog:
     """Check the log, calibrate its accelerometer if not given, find the rests and the usable
     motions between them; a ValueError saying what to change where that fails."""
     from .accel import calibrate_accel
@@ -779,6 +900,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
     if isinstance(data, SensorLog):
         acc, g = data.vectors("accel"), data.vectors("gyro")
         mag = None if data.mag is None else np.asarray(data.mag, float)
+        temp = data.temp
         t, sample_rate = data.t, sample_rate or data.sample_rate
         notes += list(data.notes)
         source = data.path
@@ -808,6 +930,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
         )
         acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
         mag = None if mag is None else mag[rows]
+        temp = None if temp is None else np.asarray(temp, float)[rows]
     dt, rate = _time_steps(t, sample_rate, len(g))
     _check_turn_axes(g)
     if accel is None:
@@ -866,7 +989,13 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options) -> _PoseLog:
             "three axes; record more poses with turns between them"
         )
 
-    return _PoseLog(acc, g, dt, rate, accel, iv, windows, dirs, pose_out, notes, warn, source)
+    if temp is not None:
+        temp = np.asarray(temp, float).ravel()
+        if len(temp) != len(g):
+            raise ValueError(
+                f"the temperature has {len(temp)} samples and the gyro {len(g)}: one per sample"
+            )
+    return _PoseLog(acc, g, dt, rate, accel, iv, windows, dirs, pose_out, notes, warn, source, temp)
 
 
 def _rest_noise(g: np.ndarray, intervals) -> np.ndarray:
@@ -889,6 +1018,9 @@ def calibrate_gyro(
     accel_options: dict | None = None,
     g_sensitivity: bool = True,
     scale_asymmetry: bool = True,
+    bias_drift: bool = True,
+    temperature: bool = True,
+    temp: np.ndarray | None = None,
 ) -> GyroCalibration:
     """Calibrate a gyroscope from a multi-position log with rotations between the poses.
 
@@ -921,6 +1053,14 @@ def calibrate_gyro(
     scale_asymmetry : bool
         Test whether turns read a different scale one way than the other (three more
         parameters, an F test at p < 1e-3 on the fit's chi2); kept when accepted.
+    bias_drift, temperature : bool
+        Test, as g-sensitivity and given what was accepted before, whether the rest bias
+        drifts linearly over the session, or follows the temperature (a log with a
+        temperature column, or ``temp``, whose poses differ by 0.1 deg C or more); an
+        accepted one is removed during the turns and reported in ``effects`` (coefficients
+        per second or per deg C), not applied to other logs.
+    temp : (N,) array, optional
+        Temperature of each sample, deg C (arrays only; a log brings its own column).
 
     Raises
     ------
@@ -931,9 +1071,9 @@ def calibrate_gyro(
     """
     if solver not in ("lm1", "lm2", "lm3"):
         raise ValueError(f"solver must be lm1, lm2 or lm3, got {solver!r}")
-    log = _pose_log(data, gyro, t, sample_rate, accel, accel_options)
+    log = _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp)
     acc, g, dt, rate, accel, iv = log.acc, log.g, log.dt, log.rate, log.accel, log.intervals
-    windows, dirs, pose_out, notes, warn = log.windows, log.dirs, log.pose_out, log.notes, log.warn
+    windows, dirs, notes, warn = log.windows, log.dirs, log.notes, log.warn
     rest, bias = log.rest, log.bias
     pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
     noise_raw = _rest_noise(g, iv)
@@ -953,50 +1093,57 @@ def calibrate_gyro(
         raw_angles = angles(jnp.eye(3).ravel() * nominal, raw_motions)
         rms_raw = rms(np.degrees(np.asarray(raw_angles)[:k]))
 
-    # close the loop on the rests: a bias that follows the acceleration is g-sensitivity
-    # G is per m/s^2: an output in other units (g, or counts fitted to a reference g) is
-    # scaled so that gravity reads standard gravity
+    # close the loop on the rests: does the rest bias follow the acceleration (g-sensitivity;
+    # G per m/s^2: an output in g, or counts fitted to a reference g, is scaled so that gravity
+    # reads standard gravity), the time (drift over the session) or the temperature? Each is
+    # tested given those already accepted; an accepted one is removed during the turns too
     to_ms2 = 1.0 if accel.output_units == "m/s^2" else 9.80665 / accel.g
-    pose_acc = pose_out * to_ms2
-    gs = _g_sensitivity(pose_means, pose_acc) if g_sensitivity else {"accepted": False}
-    G = np.zeros((3, 3))
+    tt = np.concatenate([[0.0], np.cumsum(dt[:-1])])  # seconds from the first sample
+    wanted = {"g_sensitivity": g_sensitivity, "bias_drift": bias_drift, "temperature": temperature}
+    candidates = [c for c in _rest_candidates(log, accel, to_ms2, tt, notes) if wanted[c.name]]
     effects: dict = {}
+    accepted: list[_RestCandidate] = []
+    coef = pose_means.mean(axis=0, keepdims=True)  # the joint model's coefficients, (1 + K, 3)
     current = motions
-    if g_sensitivity and np.isfinite(gs.get("F", np.nan)):
-        effects["g_sensitivity"] = {"accepted": gs["accepted"], "F": gs["F"], "p": gs["p"]}
-    if gs["accepted"]:
-        G, b_g = gs["G"], gs["bias"]
-
-        def rates_g(s, e):
-            return g[s:e] - b_g - (accel.apply(acc[s:e]) * to_ms2) @ G.T
-
-        motions_g, _ = _pad_motions(windows, rates_g, dt, dirs)
-        fit_g = _fit_scaled(motions_g, w, scale, solver)
-        effects["g_sensitivity"] |= {
-            "rest_spread_before": gs["spread_before"].tolist(),
-            "rest_spread_after": gs["spread_after"].tolist(),
+    for cand in candidates:
+        test = _rest_test(pose_means, accepted, cand)
+        if not np.isfinite(test["F"]):
+            continue
+        effects[cand.name] = {"accepted": test["accepted"], "F": test["F"], "p": test["p"]}
+        found = f"(F = {test['F']:.3g} over {len(pose_means)} poses, p = {test['p']:.2g})"
+        if not test["accepted"]:
+            notes.append(f"{cand.label} tested and not found {found}: {cand.absent}")
+            continue
+        accepted.append(cand)
+        coef = test["coef"]
+        motions_c, _ = _pad_motions(windows, _rest_model(g, accepted, coef), dt, dirs)
+        fit_c = _fit_scaled(motions_c, w, scale, solver)
+        effects[cand.name] |= {
+            "coefficients": _rest_coefficients(accepted, coef)[cand.name].tolist(),
+            "stderr": _rest_coefficients(accepted, test["stderr"])[cand.name].tolist(),
+            "unit": cand.unit.format(units=units),
+            "reference": cand.reference,
+            "rest_spread_before": test["spread_before"].tolist(),
+            "rest_spread_after": test["spread_after"].tolist(),
             "rms_without_deg": rms(after),
-            "rms_with_deg": rms(fit_g[4]),
+            "rms_with_deg": rms(fit_c[4]),
         }
         notes.append(
-            f"g-sensitivity: the rest bias follows the acceleration (F = {gs['F']:.3g} over "
-            f"{gs['poses']} poses, p = {gs['p']:.2g}); b + G a takes the spread of the pose "
-            "means from "
-            + ", ".join(f"{v:.3g}" for v in gs["spread_before"])
+            f"{cand.label}: {cand.present} {found}; it takes the spread of the pose means "
+            "from "
+            + ", ".join(f"{v:.3g}" for v in test["spread_before"])
             + " to "
-            + ", ".join(f"{v:.3g}" for v in gs["spread_after"])
+            + ", ".join(f"{v:.3g}" for v in test["spread_after"])
             + f" {units}, and the miss between poses from {rms(after):.3g} to "
-            f"{rms(fit_g[4]):.3g} deg; G is applied during the turns"
+            f"{rms(fit_c[4]):.3g} deg; {cand.applied}"
         )
-        C, cov, stderr, res, after = fit_g
-        bias = b_g
-        pose_means = pose_means - pose_acc @ G.T
-        current = motions_g
-    elif g_sensitivity and np.isfinite(gs.get("F", np.nan)):
-        notes.append(
-            f"g-sensitivity tested and not found (F = {gs['F']:.3g} over {gs['poses']} poses, "
-            f"p = {gs['p']:.2g}): the rest bias does not follow the acceleration"
-        )
+        C, cov, stderr, res, after = fit_c
+        current = motions_c
+    G = np.zeros((3, 3))
+    if accepted:
+        bias = coef[0]
+        pose_means = pose_means - _design(accepted, with_intercept=False) @ coef[1:]
+        G = _rest_coefficients(accepted, coef).get("g_sensitivity", G)
 
     asym = np.zeros(3)
     if scale_asymmetry:

@@ -652,6 +652,8 @@ class SimulatedIMU:
     pose: np.ndarray
     """Index of the still pose of each sample, -1 while turning (N,)."""
     sample_rate: float
+    temp: np.ndarray | None = None
+    """Temperature (deg C) of each sample when ``temperature_coefficient`` was given."""
 
 
 def random_gyro_matrix(
@@ -681,13 +683,17 @@ def simulate_gyro_log(
     accel_noise: float = 0.002,
     axes: np.ndarray | None = None,
     g_sensitivity: np.ndarray | None = None,
+    bias_drift: np.ndarray | None = None,
+    temperature_coefficient: np.ndarray | None = None,
 ) -> SimulatedIMU:
     """Still poses of ``hold_s`` joined by turns of ``turn_s``: each turn is about a body axis
     (uniform on the sphere, or drawn from the rows of ``axes``) by 45-135 deg, with a smooth
     rate profile (zero at both ends). The attitude is composed exactly (SciPy), independently
     of calib_jax's integrator. Noise: per-sample standard deviations in rad/s and in g.
     ``g_sensitivity`` G (raw gyro units per m/s^2) adds G f to the raw gyro, f the specific
-    force in m/s^2.
+    force in m/s^2. ``bias_drift`` (raw units per second) adds a bias growing linearly over
+    the log; ``temperature_coefficient`` (raw units per deg C) a bias following a temperature
+    that warms by 6 deg C and swings +-2 deg C with a 90 s period (returned as ``temp``).
     """
     from scipy.spatial.transform import Rotation
 
@@ -727,5 +733,11 @@ def simulate_gyro_log(
     if g_sensitivity is not None:
         gyro = gyro + (f * 9.80665) @ np.asarray(g_sensitivity, float).T
     t = np.arange(len(f)) / sample_rate
+    if bias_drift is not None:
+        gyro = gyro + t[:, None] * np.asarray(bias_drift, float)
+    temp = None
+    if temperature_coefficient is not None:
+        temp = 25.0 + 6.0 * t / t[-1] + 2.0 * np.sin(2 * np.pi * t / 90.0)
+        gyro = gyro + (temp - 25.0)[:, None] * np.asarray(temperature_coefficient, float)
     mag = mag + rng.normal(0.0, 0.2, mag.shape)
-    return SimulatedIMU(t, acc, gyro, w, mag, p, C, b, pose, sample_rate)
+    return SimulatedIMU(t, acc, gyro, w, mag, p, C, b, pose, sample_rate, temp)
