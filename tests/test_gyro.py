@@ -80,8 +80,9 @@ def test_fit_recovers_simulated_truth_within_its_standard_errors(seed, scale, mi
     sim = simulate_gyro_log(rng, gyro_matrix=C, gyro_bias=b, gyro_noise=noise)
     cal = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
     assert cal.status == "ok"
-    # none simulated: neither candidate's F test (p < 1e-3) may accept
+    # none simulated: no candidate's F test (p < 1e-3) may accept
     assert not cal.effects["g_sensitivity"]["accepted"]
+    assert not cal.effects["bias_drift"]["accepted"]
     assert not cal.effects["scale_asymmetry"]["accepted"]
     z = (cal.matrix - C) / cal.stderr_matrix
     assert np.abs(z).max() < 4.0, z
