@@ -401,7 +401,16 @@ def compare(fit: dict, test: dict, *, sample_rate: float, offsets: bool = False)
 #   gyro (12):  C row by row (true rate = C (raw - b)), then the bias b
 #   offset (4): the reference's constant body rotation and heading offset, as above
 #   delay (1):  seconds by which the reference runs ahead of the sensors (read at t - delay)
-FILTER_BLOCKS = (("accel", 9), ("mag", 12), ("gyro", 12), ("offset", 4), ("delay", 1))
+#   gyro_delay (1): seconds by which the gyro lags the accelerometer and magnetometer (its
+#               reading at t belongs to t - gyro_delay)
+FILTER_BLOCKS = (
+    ("accel", 9),
+    ("mag", 12),
+    ("gyro", 12),
+    ("offset", 4),
+    ("delay", 1),
+    ("gyro_delay", 1),
+)
 
 
 class MargGyroParams(eqx.Module):
@@ -438,30 +447,41 @@ def filter_attitude(
     *,
     g: float | jax.Array,
     gains: FilterGains | None = None,
+    gyro_delay_samples: float | jax.Array = 0.0,
 ) -> jax.Array:
     """The filter's attitude (N, 4) from raw readings through ``params``: calibrated rates,
     acceleration and the field in the accelerometer's frame (unit field), TRIAD start.
     ``g``: the calibrated accelerometer's gravity magnitude (the filter's weight reference).
     Default gains: :class:`calib_jax.filter.FilterGains` without the integral term (the gyro
-    bias is a calibration parameter here)."""
+    bias is a calibration parameter here). ``gyro_delay_samples``: the gyro is read that many
+    samples later (fractional), to undo a gyro that lags the other two sensors."""
     gains = FilterGains(k_bias=0.0) if gains is None else gains
     a, m = params.marg.apply(acc, mag)
-    q, _ = complementary_filter(params.gyro.apply(gyro), a, m, dt, gains=gains, g=g, field=1.0)
+    rates = params.gyro.apply(_shifted(jnp.asarray(gyro), gyro_delay_samples)[0])
+    q, _ = complementary_filter(rates, a, m, dt, gains=gains, g=g, field=1.0)
     return q
+
+
+def _shifted(x: jax.Array, shift):
+    """The rows read ``shift`` samples later, by linear interpolation between neighbours
+    (differentiable in the shift; the edge rows held), with where that stays inside the log,
+    the left neighbour's index and the right one's weight: (x(k + shift), inside, i0, f)."""
+    n = x.shape[0]
+    pos = jnp.arange(n, dtype=x.dtype) + shift
+    i0 = jnp.clip(jnp.floor(pos).astype(jnp.int32), 0, n - 2)
+    f = jnp.clip(pos - i0, 0.0, 1.0)[:, None]
+    inside = (pos >= 0) & (pos <= n - 1)
+    return (1.0 - f) * x[i0] + f * x[i0 + 1], inside, i0, f
 
 
 def delayed_reference(q_ref: jax.Array, w: jax.Array, delay_samples: jax.Array):
     """(q, w): the reference read ``delay_samples`` earlier (fractional: normalised linear
-    interpolation between neighbours, differentiable in the delay) and its weights (zero
-    where either neighbour has weight zero or lies outside the log)."""
-    n = q_ref.shape[0]
-    x = jnp.arange(n, dtype=q_ref.dtype) - delay_samples
-    i0 = jnp.clip(jnp.floor(x).astype(jnp.int32), 0, n - 2)
-    f = (x - i0)[:, None]
+    interpolation between neighbours, their signs aligned; differentiable in the delay) and
+    its weights (zero where either neighbour has weight zero or lies outside the log)."""
+    _, inside, i0, f = _shifted(q_ref, -delay_samples)
     a, b = q_ref[i0], q_ref[i0 + 1]
     b = jnp.where(jnp.sum(a * b, axis=1, keepdims=True) < 0, -b, b)
     q = (1.0 - f) * a + f * b
-    inside = (x >= 0) & (x <= n - 1)
     return q / jnp.linalg.norm(q, axis=1, keepdims=True), jnp.where(inside, w[i0] * w[i0 + 1], 0.0)
 
 
@@ -472,7 +492,7 @@ def _filter_residual(theta, args):
     default, free, gyro, acc, mag, dt, q_ref, w, g = args
     t = jnp.where(free, theta, default)
     p = filter_unpack(t)
-    q = filter_attitude(p, gyro, acc, mag, dt, g=g)
+    q = filter_attitude(p, gyro, acc, mag, dt, g=g, gyro_delay_samples=t[38] / dt[0])
     q_ref, w = delayed_reference(q_ref, w, t[37] / dt[0])
     e = rotation_residual(q, offset_reference(q_ref, t[33:37])) * jnp.sqrt(w)[:, None]
     sw = jnp.sum(w)
@@ -496,6 +516,8 @@ class FilterEndToEnd:
     """[body rotation vector (3, rad), heading offset (rad)] of the reference."""
     delay_s: float
     """Seconds by which the reference runs ahead of the sensors."""
+    gyro_delay_s: float
+    """Seconds by which the gyro lags the accelerometer and magnetometer."""
     result: LMResult
     """The LM fit over the fitted blocks (see :data:`FILTER_BLOCKS`)."""
     fitted: tuple[str, ...]
@@ -545,7 +567,7 @@ def end_to_end_filter(
             np.linalg.norm(np.asarray(start.marg.acc.apply(jnp.asarray(acc[: len(ok)]))), axis=1)
         )
     )
-    default = jnp.concatenate([filter_pack(start), jnp.zeros(5)])
+    default = jnp.concatenate([filter_pack(start), jnp.zeros(6)])
     free = np.concatenate([np.full(n, name in fit) for name, n in FILTER_BLOCKS])
     args = (default, jnp.asarray(free)) + tuple(
         jnp.asarray(a) for a in (gyro, acc, mag, steps, q_ref, w)
@@ -554,7 +576,8 @@ def end_to_end_filter(
     full = _run_filter(default, args + (g,), max_iter, float(dof))
     t = jnp.asarray(full.params)
     params = filter_unpack(t)
-    return FilterEndToEnd(params, np.asarray(t[33:37]), float(t[37]), _restrict(full, free), fit, g)
+    offset, delays = np.asarray(t[33:37]), (float(t[37]), float(t[38]))
+    return FilterEndToEnd(params, offset, *delays, _restrict(full, free), fit, g)
 
 
 @functools.partial(jax.jit, static_argnames=("max_iter",))
@@ -570,11 +593,14 @@ def evaluate_filter(
     mask: np.ndarray,
     offset: np.ndarray | None = None,
     delay_s: float = 0.0,
+    gyro_delay_s: float = 0.0,
 ) -> dict[str, float]:
     """RMS and median heading and inclination error (deg) of the filter's attitude over the
     samples in ``mask`` of ``trial`` (``gyro``, ``acc``, ``mag``, ``quat``), against the
-    reference corrected by ``offset`` and read ``delay_s`` earlier (as fitted)."""
-    q = filter_attitude(params, *(jnp.asarray(trial[k]) for k in ("gyro", "acc", "mag")), dt, g=g)
+    reference corrected by ``offset`` and read ``delay_s`` earlier, the gyro read
+    ``gyro_delay_s`` later (as fitted)."""
+    readings = (jnp.asarray(trial[k]) for k in ("gyro", "acc", "mag"))
+    q = filter_attitude(params, *readings, dt, g=g, gyro_delay_samples=gyro_delay_s / dt)
     ref = np.asarray(trial["quat"], float)
     ok = np.all(np.isfinite(ref), axis=1)
     ref = np.where(ok[:, None], ref, np.array([1.0, 0, 0, 0]))

@@ -33,13 +33,17 @@ TRIALS = {
     "02": "02_undisturbed_slow_rotation_B.hdf5",
     "05": "05_undisturbed_slow_rotation_with_breaks_B.hdf5",
 }
-FITS = {
-    "delay": ("delay",),
-    "gyro": ("gyro",),
-    "gyro_delay": ("gyro", "delay"),
-    "gyro_delay_offset": ("gyro", "delay", "offset"),
-    "mag_gyro_delay": ("mag", "gyro", "delay"),
-    "accel_mag_gyro_delay": ("accel", "mag", "gyro", "delay"),
+FITS = {  # row name: the blocks fitted (calib_jax.endtoend.FILTER_BLOCKS)
+    name: tuple(name.split("+"))
+    for name in (
+        "delay",
+        "delay+gyro_delay",
+        "gyro",
+        "gyro+delay",
+        "gyro+delay+offset",
+        "mag+gyro+delay",
+        "accel+mag+gyro+delay",
+    )
 }
 
 
@@ -61,7 +65,7 @@ def as_read(d: dict) -> ee.MargGyroParams:
 def main() -> None:
     out = {"runs": {}, "load": os.getloadavg()[0]}
     lines = [
-        "| fit -> held out | method | delay (ms) | gyro bias (deg/s) | gyro scales | "
+        "| fit -> held out | method | delay / gyro delay (ms) | gyro bias (deg/s) | gyro scales | "
         "fit trial: heading / incl. RMS (deg) | held out |",
         "|" + "---|" * 7,
     ]
@@ -72,22 +76,24 @@ def main() -> None:
         g = float(np.median(np.linalg.norm(df["acc"], axis=1)))
         start = ee.filter_start(df["acc"], df["gyro"], df["mag"], rate)
         rows = {
-            "as_read": (as_read(df), g, None, 0.0, None),
-            "two_stage": (start, g, None, 0.0, None),
+            "as_read": (as_read(df), g, None, 0.0, 0.0, None),
+            "two_stage": (start, g, None, 0.0, 0.0, None),
         }
         for name, blocks in FITS.items():
             t0 = time.time()
             r = ee.end_to_end_filter(
                 df["gyro"], df["acc"], df["mag"], df["quat"], dt, start, fit=blocks
             )
-            rows[name] = (r.params, r.g, r.offset, r.delay_s, (r.result, time.time() - t0))
+            seconds = time.time() - t0
+            rows[name] = (r.params, r.g, r.offset, r.delay_s, r.gyro_delay_s, (r.result, seconds))
         run = {}
-        for name, (p, gg, off, delay, res) in rows.items():
+        for name, (p, gg, off, delay, gdelay, res) in rows.items():
             row = {
-                split: ee.evaluate_filter(p, gg, d, dt, d["movement"], off, delay)
+                split: ee.evaluate_filter(p, gg, d, dt, d["movement"], off, delay, gdelay)
                 for split, d in (("fit", df), ("test", dtest))
             }
             row["delay_ms"] = 1e3 * delay
+            row["gyro_delay_ms"] = 1e3 * gdelay
             row["gyro_bias_deg_s"] = np.degrees(np.asarray(p.gyro.bias)).tolist()
             row["gyro_matrix"] = np.asarray(p.gyro.matrix).tolist()
             row["offset"] = None if off is None else np.asarray(off).tolist()
@@ -98,7 +104,7 @@ def main() -> None:
             cells = [
                 f"{fit} -> {test}",
                 name,
-                f"{row['delay_ms']:.1f}",
+                f"{row['delay_ms']:.1f} / {row['gyro_delay_ms']:.1f}",
                 ", ".join(f"{v:+.3f}" for v in row["gyro_bias_deg_s"]),
                 ", ".join(f"{v:.4f}" for v in np.diag(np.asarray(p.gyro.matrix))),
             ]

@@ -132,7 +132,8 @@ def test_end_to_end_through_the_filter_recovers_gyro_and_delay():
     formal standard errors, which assume independent residuals where the filter's are
     correlated over its time constant: tolerances 1e-3, 5e-4 rad/s and 5e-4 s. Fitting the
     gyro alone, the delay leaks into C (measured 2.0e-2): why the delay is a
-    block of its own. Bad input is named."""
+    block of its own. A gyro lagging the other sensors is told from the reference's delay.
+    Bad input is named."""
     from scipy.spatial.transform import Slerp
 
     from calib_jax import endtoend as ee
@@ -166,6 +167,16 @@ def test_end_to_end_through_the_filter_recovers_gyro_and_delay():
     assert r.delay_s == pytest.approx(delay, abs=5e-4)
     alone = fit(("gyro",))
     assert np.abs(np.asarray(alone.params.gyro.matrix) - C).max() > 3e-3
+    # a gyro that lags the accelerometer and magnetometer by 23 ms (its reading at t is the
+    # rate at t - 23 ms) beside the reference's 13.7 ms: the two delays separate (the other
+    # sensors are not late), measured 23.1 and 13.70 ms; without the gyro's block the
+    # reference delay absorbs it (20.7 ms) and C is 1.6e-2 off
+    lagged = np.column_stack([np.interp(t - 0.023, t, rates[:, i]) for i in range(3)])
+    gyro = lagged @ np.linalg.inv(C).T + b + rng.normal(0, 1e-4, rates.shape)
+    both = fit(("gyro", "delay", "gyro_delay"))
+    assert both.gyro_delay_s == pytest.approx(0.023, abs=1e-3)
+    assert both.delay_s == pytest.approx(delay, abs=5e-4)
+    assert np.abs(np.asarray(both.params.gyro.matrix) - C).max() < 1e-3
     with pytest.raises(ValueError, match="fit must name some of"):
         fit(("temperature",))
     bad = gyro.copy()
