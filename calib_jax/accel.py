@@ -278,12 +278,14 @@ def check_poses(
             else ""
         )
         raise ValueError(
-            f"only {n_distinct} distinct poses (10 degrees apart) among the {len(pts)} fit "
-            f"points: static detection {detection_found(obs.report, sample_rate)}; the "
-            f"{n_free}-parameter model needs at least {n_free} poses spread over the sphere "
-            "(paper 1 uses 48). Record more orientations, hold each still for at least half a "
-            "second, or include slow tilting motion as quasi-static samples (use='samples' "
-            "with a short window, e.g. --use samples --window 10 --threshold-factor 20)." + hint
+            f"only {n_distinct} distinct poses (gravity directions at least 10 degrees apart) "
+            f"among the {len(pts)} fit points: static detection "
+            f"{detection_found(obs.report, sample_rate)}; the {n_free}-parameter model needs at "
+            f"least {n_free} poses spread over the sphere (paper 1 uses 48). Record more "
+            "orientations and hold each still for at least half a second; if the log does "
+            "hold more orientations than were found (slow tilting with no still poses), fit "
+            "its quasi-static samples: calib-jax accel --use samples --window 10 "
+            "--threshold-factor 20 (use='samples' in Python)." + hint
         )
 
     return c_s, r_s

@@ -2,7 +2,8 @@
 ``calib-jax record``, ``calib-jax apply CAL LOG``, ``calib-jax export CAL`` and
 ``calib-jax demo``.
 
-Exit codes: 0 calibrated; 1 the fit ran but did not converge (or is not to be trusted);
+Exit codes: 0 calibrated (a poorly determined calibration too: it names the parameters);
+1 the fit ran but did not converge or failed (for ``batch``: some file was not calibrated);
 2 the input or an option cannot give a calibration (``error: ...`` says which and what to
 change); 3 an internal error (one line; ``CALIB_JAX_DEBUG=1`` shows the traceback); 130
 interrupted. Nothing here imports JAX until a command runs, so ``--help`` is instant.
@@ -294,7 +295,8 @@ def run_batch(args: argparse.Namespace) -> int:
         options.update(g=args.g)  # each log's accelerometer, fitted first
     else:
         options.update(field=args.field, model=args.model or "full")
-    print(f"calib-jax batch: {len(paths)} files under {root}, sensor {args.sensor}")
+    files = f"{len(paths)} file{'s' if len(paths) != 1 else ''}"
+    print(f"calib-jax batch: {files} under {root}, sensor {args.sensor}")
     if args.dask is not None:
         results = calibrate_files_dask(
             paths,
@@ -305,6 +307,7 @@ def run_batch(args: argparse.Namespace) -> int:
             columns=args.columns,
             use=args.use,
             detector=_detector_args(args),
+            sample_rate=args.sample_rate,
             **options,
         )
     else:
@@ -316,6 +319,7 @@ def run_batch(args: argparse.Namespace) -> int:
             use=args.use,
             progress=False if args.no_progress else None,
             detector=_detector_args(args),
+            sample_rate=args.sample_rate,
             **options,
         )
     from .calibration import FORMAT_VERSION, _sanitize  # the layout of calib_jax.BatchRecord
@@ -682,6 +686,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--field", type=_pos_float, default=None, help="magnetometer field magnitude")
     b.add_argument("--columns", default=None, help="column mapping for every file")
+    b.add_argument(
+        "--sample-rate",
+        type=_pos_float,
+        default=None,
+        help="Hz, for logs without a time column (every file)",
+    )
     b.add_argument(
         "--use",
         default="means",

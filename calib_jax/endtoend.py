@@ -34,7 +34,7 @@ from .filter import FilterGains, complementary_filter
 from .lm import LMResult, lm_solve
 from .models.accel import AccelParams, alpha_matrix
 from .models.gyro import GyroParams
-from .padding import bucket, pad_rows
+from .padding import pad_rows
 from .pipeline import (
     MagParams,
     MargParams,
@@ -43,13 +43,7 @@ from .pipeline import (
     block_covariance,
     fit_mag,
 )
-from .rotations import (
-    dcm_to_quat,
-    heading_inclination_error_deg,
-    quat_conj,
-    quat_multiply,
-    rotvec_to_dcm,
-)
+from .rotations import heading_inclination_error_deg, quat_conj, quat_exp, quat_multiply
 
 
 @jax.jit  # eager, the vmap ran (and compiled) each quaternion operation on its own
@@ -100,10 +94,8 @@ def unpack(theta: jax.Array, base: MargParams) -> MargParams:
 def offset_reference(q_ref: jax.Array, offset: jax.Array) -> jax.Array:
     """q_z(h) (x) q_ref (x) q(v) for offset = [v (3), h]: the reference corrected by a constant
     body-frame rotation and a heading offset."""
-    qb = dcm_to_quat(rotvec_to_dcm(offset[:3]))
-    h = offset[3]
-    z = jnp.zeros((), q_ref.dtype)
-    qh = jnp.stack([jnp.cos(h / 2), z, z, jnp.sin(h / 2)])
+    qb = quat_exp(offset[:3])
+    qh = quat_exp(offset[3] * jnp.array([0.0, 0.0, 1.0], q_ref.dtype))
     return jax.vmap(lambda q: quat_multiply(qh, quat_multiply(q, qb)))(q_ref)
 
 
@@ -158,8 +150,7 @@ def two_stage(acc: np.ndarray, mag: np.ndarray) -> TwoStage:
     mag = np.asarray(mag, float)
     ok = np.all(np.isfinite(mag), axis=1)  # NaN rows: zero weight and a finite stand-in
     # padded to a power of two (weight 0): one compilation serves trials of similar length
-    stand_in, w = pad_rows(np.where(ok[:, None], mag, 0.0))
-    w[: len(ok)] = ok
+    stand_in, w = pad_rows(np.where(ok[:, None], mag, 0.0), weights=ok)
     fit = _fit_mag_jit(jnp.asarray(stand_in), 1.0, jnp.asarray(w))
     m = np.asarray(fit.params.apply(jnp.asarray(mag)))  # NaN rows stay NaN; align drops them
     al = align_mag_to_accel(acc, m, search_permutations=False)
@@ -220,9 +211,7 @@ def end_to_end(
     if ok.sum() < 50:
         raise ValueError(f"only {int(ok.sum())} samples have a finite reference attitude")
     # padded to a power of two with weight 0: trials of similar length share one compilation
-    size = bucket(len(w))
-    acc, mag, q_ref = (pad_rows(a, size)[0] for a in (acc, mag, q_ref))
-    w = np.concatenate([w, np.zeros(size - len(w))])
+    (acc, _), (mag, _), (q_ref, w) = (pad_rows(a, weights=w) for a in (acc, mag, q_ref))
     fitted = tuple(
         name
         for name, on in (("calibration", fit_calibration), ("dip", fit_dip), ("offset", fit_offset))
@@ -322,16 +311,21 @@ def evaluate(
     rows = [pad_rows(a[k])[0] for a in (acc, mag)]
     q = _attitude_jit(params, *(jnp.asarray(r) for r in rows), jnp.asarray(dip_deg))
     e = np.asarray(attitude_errors(q, jnp.asarray(pad_rows(ref)[0])))[: int(k.sum())]
+    return _error_summary(e)
+
+
+_attitude_jit = jax.jit(attitude)
+
+
+def _error_summary(e: np.ndarray) -> dict[str, float]:
+    """RMS and median of the (n, 2) heading and inclination errors, and n."""
     return {
-        "n": int(k.sum()),
+        "n": len(e),
         "heading_rms": float(np.sqrt(np.mean(e[:, 0] ** 2))),
         "inclination_rms": float(np.sqrt(np.mean(e[:, 1] ** 2))),
         "heading_median": float(np.median(e[:, 0])),
         "inclination_median": float(np.median(e[:, 1])),
     }
-
-
-_attitude_jit = jax.jit(attitude)
 
 
 def compare(fit: dict, test: dict, *, sample_rate: float, offsets: bool = False) -> dict:
@@ -557,11 +551,9 @@ def end_to_end_filter(
     q_ref = np.where(ok[:, None], quat_ref, np.array([1.0, 0, 0, 0]))
     q_ref = q_ref / np.linalg.norm(q_ref, axis=1, keepdims=True)
     # padded at the end with zero steps and weights: the filter's earlier output is unchanged
-    size = bucket(len(w))
-    gyro, acc, mag, q_ref = (pad_rows(a, size)[0] for a in (gyro, acc, mag, q_ref))
-    steps = np.zeros(size)
-    steps[: len(w)] = dt
-    w = np.concatenate([w, np.zeros(size - len(w))])
+    steps = pad_rows(np.full(len(w), float(dt)))[1] * dt
+    (gyro, _), (acc, _), (mag, _) = (pad_rows(a) for a in (gyro, acc, mag))
+    q_ref, w = pad_rows(q_ref, weights=w)
     g = float(
         np.median(
             np.linalg.norm(np.asarray(start.marg.acc.apply(jnp.asarray(acc[: len(ok)]))), axis=1)
@@ -610,13 +602,7 @@ def evaluate_filter(
         ref = offset_reference(ref, jnp.asarray(offset))
     k = np.asarray(mask, bool) & (np.asarray(w) > 0)
     e = np.asarray(attitude_errors(q, ref))[k]
-    return {
-        "n": int(k.sum()),
-        "heading_rms": float(np.sqrt(np.mean(e[:, 0] ** 2))),
-        "inclination_rms": float(np.sqrt(np.mean(e[:, 1] ** 2))),
-        "heading_median": float(np.median(e[:, 0])),
-        "inclination_median": float(np.median(e[:, 1])),
-    }
+    return _error_summary(e)
 
 
 def rest_gyro_bias(acc, gyro, mag, sample_rate: float, min_rest_s: float = 2.0) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 
 from .io.files import SensorLog, load_log
 from .observations import accel_observations, detector_keywords, screen_samples
-from .padding import bucket
+from .padding import stack_rows
 
 SENSORS = ("accel", "mag", "gyro")
 
@@ -97,12 +97,8 @@ def fit_prepared(
         fit.append((name, pts, info))
     if not fit:
         return out
-    n = bucket(max(len(x) for _, x, _ in fit))
-    raw = np.zeros((len(fit), n, 3))
-    mask = np.zeros((len(fit), n), bool)
-    for i, (_, x, _) in enumerate(fit):
-        raw[i, : len(x)] = x
-        mask[i, : len(x)] = True
+    raw, w = stack_rows([x for _, x, _ in fit])
+    mask = w > 0
     # float64 for this fit only: the caller's (or a Dask worker's) jax setting is left as it was
     with jax.enable_x64(True):
         if sensor == "accel":
@@ -124,16 +120,17 @@ def _fit_chunk(
     options: dict,
     use: str = "means",
     detector: dict | None = None,
+    sample_rate: float | None = None,
 ) -> list[dict]:
     """Prepare and fit one chunk of files (also the Dask task); ``detector`` holds the
     detector options (window, threshold_factor, min_static), converted per log by
     :func:`calib_jax.observations.detector_keywords`."""
     if sensor == "gyro":
-        return [_gyro_entry(p, columns, options, detector) for p in paths]
+        return [_gyro_entry(p, columns, options, detector, sample_rate) for p in paths]
     prepared, out = [], []
     for p in paths:
         try:
-            log = load_log(p, columns=columns, sensor=sensor)
+            log = load_log(p, columns=columns, sensor=sensor, sample_rate=sample_rate)
             found = detector_keywords(sample_rate=log.sample_rate, **(detector or {}))
             pts, info = prepare_log(log, sensor, model=options.get("model"), use=use, **found)
             prepared.append((p, pts, info))
@@ -153,7 +150,9 @@ def _load_error(p, exc: Exception) -> dict:
     return {"path": str(p), "status": "load_error", "message": msg}
 
 
-def _gyro_entry(p, columns, options: dict, detector: dict | None) -> dict:
+def _gyro_entry(
+    p, columns, options: dict, detector: dict | None, sample_rate: float | None = None
+) -> dict:
     """One gyro log through :func:`calib_jax.calibrate_gyro` (the same fit, candidate effects
     and checks as ``calib-jax gyro``; its compiled parts are shared by every log of a padded
     shape): the batch entry, with C row by row then b as ``params`` and the miss between
@@ -161,7 +160,7 @@ def _gyro_entry(p, columns, options: dict, detector: dict | None) -> dict:
     from .gyro import calibrate_gyro
 
     try:
-        log = load_log(p, columns=columns)
+        log = load_log(p, columns=columns, sample_rate=sample_rate)
         found = detector_keywords(sample_rate=log.sample_rate, **(detector or {}))
         cal = calibrate_gyro(log, accel_options={"g": options.get("g"), **found})
     except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
@@ -222,6 +221,7 @@ def calibrate_files(
     use: str = "means",
     progress: bool | None = None,
     detector: dict | None = None,
+    sample_rate: float | None = None,
     **options,
 ) -> Iterator[dict]:
     """Calibrate many logs chunk by chunk, yielding one result dict per file, in order.
@@ -230,7 +230,8 @@ def calibrate_files(
     would prepare it (:func:`prepare_log`; ``use`` as in ``calibrate_accel``), so a file gets
     the parameters its single fit gives. ``detector``: the static detector's options for every
     log (``window``, ``threshold_factor``, ``min_static`` in seconds, or samples for a log
-    without a rate; default automatic). ``options`` go to the batch fit (``g``, ``model``,
+    without a rate; default automatic). ``sample_rate``: Hz for logs without a time column
+    (every file). ``options`` go to the batch fit (``g``, ``model``,
     ``solver``, ``field`` ...). Memory holds one chunk. ``progress``: a progress bar counting
     files and failures (:func:`progress_bar`; None: on a terminal or in a notebook only).
     """
@@ -238,7 +239,7 @@ def calibrate_files(
     failed = 0
     with progress_bar(len(paths), progress, f"calibrating {sensor}") as bar:
         for part in _chunks(paths, chunk):
-            for res in _fit_chunk(part, sensor, columns, options, use, detector):
+            for res in _fit_chunk(part, sensor, columns, options, use, detector, sample_rate):
                 failed += res["status"] != "ok"
                 bar.update(1)
                 bar.set_postfix(not_calibrated=failed, refresh=False)
@@ -264,6 +265,7 @@ def calibrate_files_dask(
     columns: str | None = None,
     use: str = "means",
     detector: dict | None = None,
+    sample_rate: float | None = None,
     **options,
 ) -> Iterator[dict]:
     """:func:`calibrate_files` with the chunks spread over a Dask cluster; each file's result
@@ -285,6 +287,7 @@ def calibrate_files_dask(
         ) from exc
     parts = list(_chunks([str(p) for p in paths], chunk))
     task = dict(sensor=sensor, columns=columns, options=options, use=use, detector=detector)
+    task["sample_rate"] = sample_rate
     return _stream_from_dask(parts, task, scheduler, n_workers)
 
 

@@ -409,7 +409,8 @@ def _time_steps(t, sample_rate, n: int) -> tuple[np.ndarray, float]:
     if sample_rate is None:
         raise ValueError(
             "the gyro fit integrates the rates over time, and the log has neither a time "
-            "column nor a sample rate: give sample_rate= (--sample-rate HZ)"
+            "column nor a sample rate: give the rate (--sample-rate HZ on the command line, "
+            "sample_rate= in Python)"
         )
     return np.full(n, 1.0 / sample_rate), float(sample_rate)
 

@@ -68,7 +68,7 @@ from .mag import fit_ellipsoid_normalized
 from .models.accel import AccelParams
 from .models.gyro import GyroParams, Motions, gravity_residual
 from .models.mag import natural_radius, raw_calibration, raw_covariance, unpack
-from .padding import bucket
+from .padding import bucket, stack_rows
 from .rotations import euler_zyx_deg, rotvec_to_dcm
 from .status import CONVERGED_STATUSES, Status
 
@@ -494,12 +494,8 @@ def gyro_inputs(
     log = _pose_log(data, gyro, t, sample_rate, accel, accel_options)
     g = log.g
     motions, w = _pad_motions(log.windows, lambda s, e: g[s:e], log.dt, log.dirs)
-    lengths = [int(e - s) for s, e in log.intervals]
-    rest = np.zeros((bucket(len(lengths)), bucket(max(lengths)), 3))
-    rest_w = np.zeros(rest.shape[:2])
-    for i, (s, e) in enumerate(log.intervals):
-        rest[i, : e - s] = g[s:e]
-        rest_w[i, : e - s] = 1.0
+    rests = [g[s:e] for s, e in log.intervals]
+    rest, rest_w = stack_rows(rests, count=bucket(len(rests)))
     return GyroInputs(motions, jnp.asarray(w), jnp.asarray(rest), jnp.asarray(rest_w))
 
 

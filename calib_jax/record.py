@@ -98,6 +98,17 @@ def _octants_missing(dirs: np.ndarray) -> list[str]:
     return out
 
 
+def _detector(window, threshold_factor, min_static, sample_rate) -> dict:
+    """The static detector's keywords for one recorded log (a minimum duration in seconds
+    only where the log has a rate)."""
+    return detector_keywords(
+        window=window,
+        threshold_factor=threshold_factor,
+        min_static=min_static if sample_rate else None,
+        sample_rate=sample_rate,
+    )
+
+
 @dataclass(frozen=True)
 class Coverage:
     """What one device's recording covers so far."""
@@ -215,12 +226,7 @@ def assess_coverage(
             x,
             sample_rate=sample_rate,
             valid=ok,
-            **detector_keywords(
-                window=window,
-                threshold_factor=threshold_factor,
-                min_static=min_duration if sample_rate else None,
-                sample_rate=sample_rate,
-            ),
+            **_detector(window, threshold_factor, min_duration, sample_rate),
         )
         means = rep.means()
         centre = _sphere_centre(means)
@@ -523,12 +529,7 @@ def calibrate_recording(
             g=g,
             sensor_id=sensor_id,
             solver=solver,
-            **detector_keywords(
-                window=window,
-                threshold_factor=threshold_factor,
-                min_static=min_static if log.sample_rate else None,
-                sample_rate=log.sample_rate,
-            ),
+            **_detector(window, threshold_factor, min_static, log.sample_rate),
         )
         wrote = _save(lambda: cal.save(out["accel"]), out["accel"], errors)
         say(f"accelerometer, {path}:\n{cal.report()}\n{wrote[2:]}")
@@ -541,12 +542,7 @@ def calibrate_recording(
     if sensor == "gyro":
         from .gyro import calibrate_gyro
 
-        detector = detector_keywords(
-            window=window,
-            threshold_factor=threshold_factor,
-            min_static=min_static if log.sample_rate else None,
-            sample_rate=log.sample_rate,
-        )
+        detector = _detector(window, threshold_factor, min_static, log.sample_rate)
         gcal = calibrate_gyro(
             log, sensor_id=sensor_id, solver=solver, accel_options={"g": g, **detector}
         )
@@ -630,12 +626,7 @@ def calibrate_devices(
         for i, (lg, p) in enumerate(zip(logs, paths, strict=True)):
             detector = {}
             if kind == "accel":
-                detector = detector_keywords(
-                    window=window,
-                    threshold_factor=threshold_factor,
-                    min_static=min_static if lg.sample_rate else None,
-                    sample_rate=lg.sample_rate,
-                )
+                detector = _detector(window, threshold_factor, min_static, lg.sample_rate)
             try:
                 pts, info = prepare_log(lg, kind, **detector)
             except ValueError as exc:

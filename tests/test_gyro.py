@@ -426,21 +426,24 @@ def test_pipeline_fit_gyro_is_calibrate_gyro_differentiated_and_vmapped(sim):
 
 def test_batch_of_gyro_logs_is_calibrate_gyro_per_file(sim, tmp_path, capsys):
     """calib-jax batch --sensor gyro: each log gets calibrate_gyro's parameters (the same
-    code, compared to 1e-12), a log without gyro columns gets its error and does not stop the
-    others, and the JSON loads as a BatchRecord whose pytrees apply like the records."""
+    code, compared to 1e-12), a headerless log without time takes --sample-rate, a log
+    without gyro columns gets its error and does not stop the others, and the JSON loads as a
+    BatchRecord whose pytrees apply like the records."""
     from calib_jax.calibration import BatchRecord
     from calib_jax.io.files import load_log
 
     logs = tmp_path / "logs"
     logs.mkdir()
-    for name, s in (("a", sim), ("b", simulate_gyro_log(6, n_poses=12))):
-        table = np.column_stack([s.t, s.acc, s.gyro])
-        np.savetxt(logs / f"{name}.csv", table, delimiter=",", header="t,ax,ay,az,gx,gy,gz",
-                   comments="")  # fmt: skip
+    table = np.column_stack([sim.t, sim.acc, sim.gyro])
+    np.savetxt(logs / "a.csv", table, delimiter=",", header="t,ax,ay,az,gx,gy,gz", comments="")
+    # a headerless 6-column log without a time column: the rate comes from --sample-rate
+    other = simulate_gyro_log(6, n_poses=12)
+    np.savetxt(logs / "b.csv", np.column_stack([other.acc, other.gyro]), delimiter=",")
     np.savetxt(logs / "c.csv", np.column_stack([sim.t, sim.acc]), delimiter=",",
                header="t,ax,ay,az", comments="")  # fmt: skip
     out, tab = tmp_path / "fleet.json", tmp_path / "fleet.csv"
-    rc = main(["batch", str(logs), "--sensor", "gyro", "--json", str(out), "--table", str(tab)])
+    args = ["--sensor", "gyro", "--sample-rate", "100", "--json", str(out), "--table", str(tab)]
+    rc = main(["batch", str(logs), *args])
     text = capsys.readouterr().out
     assert rc == 1 and "2 of 3 calibrated" in text and "no gyro columns" in text
     rec = BatchRecord.load(out)

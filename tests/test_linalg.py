@@ -113,3 +113,21 @@ def test_det3_and_the_alpha_layout_both_ways():
     alpha = p[ALPHA_INDEX]
     np.testing.assert_array_equal(alpha, alpha.T)
     np.testing.assert_array_equal(alpha[ALPHA_ENTRIES], p[:6])
+
+
+def test_padding_helpers_keep_data_and_weigh_padding_zero():
+    """pad_rows: the data first, the first row repeated (finite, in range), weights as given
+    on the data and 0 on the padding; stack_rows: logs of different lengths in one stack with
+    the same weights, extra entries all zero weight; bucket: powers of two from 64."""
+    from calib_jax.padding import bucket, pad_rows, stack_rows
+
+    assert [bucket(n) for n in (1, 64, 65, 1000)] == [64, 64, 128, 1024]
+    x = np.arange(15.0).reshape(5, 3)
+    xp, w = pad_rows(x, 8, weights=np.array([1.0, 0.0, 2.0, 1.0, 1.0]))
+    np.testing.assert_array_equal(xp[:5], x)
+    np.testing.assert_array_equal(xp[5:], np.repeat(x[:1], 3, axis=0))
+    np.testing.assert_array_equal(w, [1, 0, 2, 1, 1, 0, 0, 0])
+    s, sw = stack_rows([x, x[:2]], count=3)
+    assert s.shape == (3, 64, 3) and sw.shape == (3, 64)
+    np.testing.assert_array_equal(s[1, :2], x[:2])
+    np.testing.assert_array_equal(sw.sum(axis=1), [5, 2, 0])
