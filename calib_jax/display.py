@@ -131,12 +131,48 @@ def mag_repr(cal) -> str:
     )
 
 
+def gyro_html(cal) -> str:
+    """C and b with standard errors, the miss between poses before and after beside its
+    floor, the noise, each candidate effect's test, warnings and notes."""
+    unit_c = f"rad/s per {cal.input_units}"
+    rows = [
+        [f"C_{r}{c}", cal.matrix[i, j], cal.stderr_matrix[i, j], unit_c]
+        for i, r in enumerate("xyz")
+        for j, c in enumerate("xyz")
+    ]
+    rows += [
+        [f"b_{a}", v, e, cal.input_units]
+        for a, v, e in zip("xyz", cal.bias, cal.stderr_bias, strict=True)
+    ]
+    summary = (
+        f"<div>miss between poses (RMS over {cal.n_motions} motions): {_fmt(cal.rms_before_deg, 3)}"
+        f" &rarr; {_fmt(cal.rms_after_deg, 3)} deg (rest-noise floor "
+        f"{_fmt(cal.noise_floor_deg, 3)} deg); {cal.n_poses} poses; {escape(cal.solver)}: "
+        f"{escape(cal.solver_message)} ({cal.iterations} iterations)</div>"
+    )
+    effects = [
+        [name, "accepted" if e.get("accepted") else "not found", e.get("F"), e.get("p")]
+        for name, e in cal.effects.items()
+    ]
+    if effects:
+        summary += table(["candidate effect", "verdict", "F", "p"], effects)
+    if cal.poorly_determined:
+        summary += (
+            f"<div class='warn'>poorly determined: {escape(', '.join(cal.poorly_determined))}</div>"
+        )
+    body = table(["parameter", "value", "std. error", "unit"], rows) + summary
+    title = f"GyroCalibration ({cal.method}, {cal.input_units} -> rad/s)"
+    return _card(title, cal.status, body + _lists(cal.warnings, cal.notes))
+
+
 def marg_html(rec) -> str:
     parts = [f"<div>accelerometer: {escape(rec.accel_method)}</div>"]
     if rec.accel is not None:
         parts.append(rec.accel._repr_html_())
     parts.append(rec.mag._repr_html_())
     parts.append(f"<div>{escape(rec.alignment_text())}</div>")
+    if rec.gyro is not None:
+        parts.append(rec.gyro._repr_html_())
     return _card("MARGRecord", rec.status, "".join(parts) + _lists(rec.warnings, []))
 
 

@@ -176,6 +176,11 @@ class GyroCalibration(Record):
             f"{self.rms_before_deg:.3g} -> {self.rms_after_deg:.3g} deg)"
         )
 
+    def _repr_html_(self) -> str:
+        from .display import gyro_html
+
+        return gyro_html(self)
+
     def report(self) -> str:
         """What the CLI prints: C with its standard errors, b, the errors and the status."""
         T, K = self.imu_tk()

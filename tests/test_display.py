@@ -188,3 +188,17 @@ def test_figures_mark_the_gaps_and_clip_nothing(tmp_path):
     [hist] = [a for a in fig.axes if "histogram" in a.get_title()]
     edges = [p.get_x() for p in hist.patches] + [p.get_x() + p.get_width() for p in hist.patches]
     assert min(edges) <= 0.0 and max(edges) >= 39.0  # percent: the outlier is in range
+
+
+def test_gyro_html_holds_c_b_the_miss_and_the_candidates():
+    from calib_jax.simulate import simulate_gyro_log
+
+    sim = simulate_gyro_log(5, n_poses=12)
+    cal = cj.calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    text = _parsed_text(cal._repr_html_())
+    for v in (*cal.matrix.ravel(), *cal.stderr_matrix.ravel(), *cal.bias, *cal.stderr_bias):
+        assert f"{v:.6g}" in text
+    assert f"{cal.rms_after_deg:.3g}" in text and f"{cal.noise_floor_deg:.3g}" in text
+    assert all(name in text for name in cal.effects) and "not found" in text
+    assert "GyroCalibration" in text and cal.status in text
+    assert len(repr(cal)) < 250 and "\n" not in repr(cal)
