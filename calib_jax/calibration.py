@@ -969,8 +969,10 @@ class BatchRecord(Record):
             if self.sensor == "accel":
                 out[e["path"]] = AccelParams.from_vector(p)
             elif self.sensor == "gyro":
-                G = jnp.asarray(e.get("g_sensitivity") or np.zeros(9), jnp.float64)
-                s = jnp.asarray(e.get("scale_asymmetry") or np.zeros(3), jnp.float64)
+                G = e.get("g_sensitivity")
+                s = e.get("scale_asymmetry")
+                G = jnp.asarray(np.zeros(9) if G is None else G, jnp.float64)
+                s = jnp.asarray(np.zeros(3) if s is None else s, jnp.float64)
                 out[e["path"]] = GyroParams(p[:9].reshape(3, 3), p[9:], G.reshape(3, 3), s)
             else:
                 out[e["path"]] = MagParams.from_vector(p)

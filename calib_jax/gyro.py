@@ -542,9 +542,11 @@ class _RestCandidate:
     reference: float | None = None
 
 
-def _rest_candidates(log: _PoseLog, accel, to_ms2: float, tt, notes: list) -> list:
+def _rest_candidates(
+    log: _PoseLog, accel, to_ms2: float, tt, notes: list, temperature: bool = True
+) -> list:
     """The candidates a log allows, in the order they are tested: the acceleration (always),
-    the time, the temperature (with a temperature column that varies)."""
+    the time, the temperature (with ``temperature``, and a temperature column that varies)."""
     iv = log.intervals
     pose_t = np.array([tt[s:e].mean() for s, e in iv])
     t0 = float(pose_t.mean())
@@ -572,7 +574,7 @@ def _rest_candidates(log: _PoseLog, accel, to_ms2: float, tt, notes: list) -> li
             t0,
         ),
     ]
-    if log.temp is not None:
+    if temperature and log.temp is not None:
         temp = log.temp
         pose_T = np.array([np.nanmean(temp[s:e]) for s, e in iv])
         if np.all(np.isfinite(pose_T)) and np.ptp(pose_T) >= 0.1:
@@ -1106,7 +1108,8 @@ def calibrate_gyro(
     to_ms2 = 1.0 if accel.output_units == "m/s^2" else 9.80665 / accel.g
     tt = np.concatenate([[0.0], np.cumsum(dt[:-1])])  # seconds from the first sample
     wanted = {"g_sensitivity": g_sensitivity, "bias_drift": bias_drift, "temperature": temperature}
-    candidates = [c for c in _rest_candidates(log, accel, to_ms2, tt, notes) if wanted[c.name]]
+    found_in_log = _rest_candidates(log, accel, to_ms2, tt, notes, temperature)
+    candidates = [c for c in found_in_log if wanted[c.name]]
     effects: dict = {}
     accepted: list[_RestCandidate] = []
     coef = pose_means.mean(axis=0, keepdims=True)  # the joint model's coefficients, (1 + K, 3)

@@ -24,8 +24,8 @@ Functions:
 
 - :func:`apply`, :func:`residual`: calibrated samples and the sphere residual.
 - :func:`fit_accel`, :func:`fit_mag`, :func:`fit_gyro`: the fit of one sensor, returning a
-  :class:`Fit` whose
-  ``params`` are differentiable in the samples, the weights and the reference magnitude by
+  :class:`Fit` whose ``params`` are differentiable in the samples, the weights and the
+  reference magnitude (for the gyro: the rates, time steps, gravity directions and rests) by
   the implicit function theorem (:func:`calib_jax.implicit.solve_implicit`), never by
   unrolling the LM loop. :func:`fit_batch` vmaps the first two over a leading sensor axis;
   :func:`fit_gyro` takes :class:`GyroInputs` (:func:`gyro_inputs` cuts a log into them,
