@@ -57,6 +57,12 @@ def _lists(warnings: list[str], notes: list[str]) -> str:
     return out
 
 
+def _poorly_determined(names: list[str]) -> str:
+    if not names:
+        return ""
+    return f"<div class='warn'>poorly determined: {escape(', '.join(names))}</div>"
+
+
 def _card(title: str, status: str, body: str) -> str:
     return f'{_STYLE}<div class="cj"><b>{escape(title)}</b> {_badge(status)}{body}</div>'
 
@@ -80,10 +86,7 @@ def accel_html(cal) -> str:
         f"{escape(cal.solver_message)} ({cal.iterations} iterations); condition "
         f"{_fmt(cal.condition, 3)}</div>"
     )
-    if cal.poorly_determined:
-        summary += (
-            f"<div class='warn'>poorly determined: {escape(', '.join(cal.poorly_determined))}</div>"
-        )
+    summary += _poorly_determined(cal.poorly_determined)
     body = table(["parameter", "value", "std. error", "unit"], rows) + summary
     title = f"AccelCalibration ({cal.model}, {cal.input_units} -> {cal.output_units})"
     return _card(title, cal.status, body + _lists(cal.warnings, cal.notes))
@@ -156,10 +159,7 @@ def gyro_html(cal) -> str:
     ]
     if effects:
         summary += table(["candidate effect", "verdict", "F", "p"], effects)
-    if cal.poorly_determined:
-        summary += (
-            f"<div class='warn'>poorly determined: {escape(', '.join(cal.poorly_determined))}</div>"
-        )
+    summary += _poorly_determined(cal.poorly_determined)
     body = table(["parameter", "value", "std. error", "unit"], rows) + summary
     title = f"GyroCalibration ({cal.method}, {cal.input_units} -> rad/s)"
     return _card(title, cal.status, body + _lists(cal.warnings, cal.notes))
