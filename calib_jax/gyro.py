@@ -885,16 +885,14 @@ class _PoseLog:
     notes: list
     warn: list
     source: object
+    bias: np.ndarray
+    """(3,) the mean raw reading over every rest sample."""
+    noise: np.ndarray
+    """(3,) the raw readings' white noise at rest (:func:`_rest_noise`)."""
+    n_rest: int
+    """Rest samples in all."""
     temp: np.ndarray | None = None
     """Temperature of each sample (deg C), when the log has it."""
-
-    @property
-    def rest(self) -> np.ndarray:
-        return np.concatenate([self.g[s:e] for s, e in self.intervals])
-
-    @property
-    def bias(self) -> np.ndarray:
-        return self.rest.mean(axis=0)
 
 
 def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _PoseLog:
@@ -1003,7 +1001,10 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             raise ValueError(
                 f"the temperature has {len(temp)} samples and the gyro {len(g)}: one per sample"
             )
-    return _PoseLog(acc, g, dt, rate, accel, iv, windows, dirs, pose_out, notes, warn, source, temp)
+    return _PoseLog(
+        acc, g, dt, rate, accel, iv, windows, dirs, pose_out, notes, warn, source,
+        bias, noise_raw, len(rest), temp,
+    )  # fmt: skip
 
 
 def _rest_noise(g: np.ndarray, intervals) -> np.ndarray:
@@ -1082,9 +1083,8 @@ def calibrate_gyro(
     log = _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp)
     acc, g, dt, rate, accel, iv = log.acc, log.g, log.dt, log.rate, log.accel, log.intervals
     windows, dirs, notes, warn = log.windows, log.dirs, log.notes, log.warn
-    rest, bias = log.rest, log.bias
+    bias, noise_raw = log.bias, log.noise
     pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
-    noise_raw = _rest_noise(g, iv)
     motions, w = _pad_motions(windows, lambda s, e: g[s:e] - bias, dt, dirs)
     k = len(windows)
     scale = float(_compiled("start")(motions, jnp.asarray(w)))
@@ -1205,7 +1205,7 @@ def calibrate_gyro(
         )
     notes.append(
         f"{k} motions between {len(iv)} static poses integrated; bias from "
-        f"{len(rest)} rest samples (Earth's rate, up to 7.3e-5 rad/s, stays in it)"
+        f"{log.n_rest} rest samples (Earth's rate, up to 7.3e-5 rad/s, stays in it)"
     )
     return GyroCalibration(
         matrix=C,
