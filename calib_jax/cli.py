@@ -308,6 +308,7 @@ def run_batch(args: argparse.Namespace) -> int:
             use=args.use,
             detector=_detector_args(args),
             sample_rate=args.sample_rate,
+            progress=False if args.no_progress else None,
             **options,
         )
     else:
@@ -758,6 +759,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--resume", action="store_true", help="append to an existing log")
     r.add_argument("--overwrite", action="store_true", help="replace an existing log")
     r.add_argument("--no-auto-stop", action="store_true", help="keep going once covered")
+    r.add_argument(
+        "--no-progress", action="store_true", help="a coverage line a second, not a progress bar"
+    )
     r.add_argument("--target-poses", type=_pos_int, default=48, help="distinct poses (paper 1: 48)")
     r.add_argument(
         "--max-reconnect",
@@ -847,6 +851,7 @@ def _add_diagnose_parser(sub) -> None:
     )
     p.add_argument("--degree", type=int, choices=(1, 2), default=1, help="effect polynomial degree")
     p.add_argument("--seed", type=int, default=0, help="seed of the null-test simulations")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar over the rounds")
     p.add_argument("--json", dest="json_out", help="write the diagnosis JSON here ('-': stdout)")
     p.add_argument("--report", help="write the figures into this directory")
     p.set_defaults(

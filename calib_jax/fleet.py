@@ -12,7 +12,6 @@ local one by default, or a scheduler address), each worker running the same chun
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -21,6 +20,7 @@ import numpy as np
 from .io.files import SensorLog, load_log
 from .observations import accel_observations, detector_keywords, screen_samples
 from .padding import stack_rows
+from .progress import progress_bar
 
 SENSORS = ("accel", "mag", "gyro")
 
@@ -189,29 +189,6 @@ def _chunks(items: list, size: int) -> Iterator[list]:
         yield items[i : i + size]
 
 
-def _in_notebook() -> bool:
-    """True inside a Jupyter kernel (not merely when IPython or ipykernel is imported, as
-    they are in a test runner that executes notebooks)."""
-    ipython = sys.modules.get("IPython")
-    shell = ipython.get_ipython() if ipython is not None else None
-    return type(shell).__name__ == "ZMQInteractiveShell"
-
-
-def progress_bar(total: int, enabled: bool | None, desc: str):
-    """A ``tqdm.auto`` bar (a widget in Jupyter, a line on a terminal). ``enabled=None``:
-    shown on a terminal or in a notebook kernel, hidden when output goes to a file or pipe.
-    tqdm's monitor thread is not started (it only retunes ``miniters`` of stalled bars, and
-    a thread left behind in the caller's process is a side effect)."""
-    from tqdm.auto import tqdm
-
-    class Bar(tqdm):
-        monitor_interval = 0
-
-    if enabled is None:
-        enabled = sys.stderr.isatty() or _in_notebook()
-    return Bar(total=total, desc=desc, unit="file", disable=not enabled, leave=True)
-
-
 def calibrate_files(
     paths: Iterable[str | Path],
     *,
@@ -232,18 +209,28 @@ def calibrate_files(
     log (``window``, ``threshold_factor``, ``min_static`` in seconds, or samples for a log
     without a rate; default automatic). ``sample_rate``: Hz for logs without a time column
     (every file). ``options`` go to the batch fit (``g``, ``model``,
-    ``solver``, ``field`` ...). Memory holds one chunk. ``progress``: a progress bar counting
-    files and failures (:func:`progress_bar`; None: on a terminal or in a notebook only).
+    ``solver``, ``field`` ...). Memory holds one chunk. ``progress``: a progress bar
+    counting files and failures (:func:`calib_jax.progress.progress_bar`; None: on a
+    terminal or in a notebook only).
     """
     paths = [str(p) for p in paths]
+    results = (
+        res
+        for part in _chunks(paths, chunk)
+        for res in _fit_chunk(part, sensor, columns, options, use, detector, sample_rate)
+    )
+    yield from _counted(results, len(paths), progress, sensor)
+
+
+def _counted(results: Iterator[dict], total: int, progress, sensor: str) -> Iterator[dict]:
+    """Pass the results through, counting files and failures on a progress bar."""
     failed = 0
-    with progress_bar(len(paths), progress, f"calibrating {sensor}") as bar:
-        for part in _chunks(paths, chunk):
-            for res in _fit_chunk(part, sensor, columns, options, use, detector, sample_rate):
-                failed += res["status"] != "ok"
-                bar.update(1)
-                bar.set_postfix(not_calibrated=failed, refresh=False)
-                yield res
+    with progress_bar(total, progress, f"calibrating {sensor}") as bar:
+        for res in results:
+            failed += res["status"] != "ok"
+            bar.update(1)
+            bar.set_postfix(not_calibrated=failed, refresh=False)
+            yield res
 
 
 def to_dataframe(results, sensor: str | None = None):
@@ -266,6 +253,7 @@ def calibrate_files_dask(
     use: str = "means",
     detector: dict | None = None,
     sample_rate: float | None = None,
+    progress: bool | None = None,
     **options,
 ) -> Iterator[dict]:
     """:func:`calibrate_files` with the chunks spread over a Dask cluster; each file's result
@@ -277,7 +265,7 @@ def calibrate_files_dask(
     started when the first result is asked for and closed after the last (or when the
     iterator is closed). Needs ``dask[distributed]`` (``pip install 'calib_jax[dask]'``).
     Workers must be able to read the paths (a shared file system, or the same paths on every
-    machine).
+    machine). ``progress``: as in :func:`calibrate_files`, advancing as chunks finish.
     """
     try:
         import dask.distributed  # noqa: F401
@@ -288,10 +276,10 @@ def calibrate_files_dask(
     parts = list(_chunks([str(p) for p in paths], chunk))
     task = dict(sensor=sensor, columns=columns, options=options, use=use, detector=detector)
     task["sample_rate"] = sample_rate
-    return _stream_from_dask(parts, task, scheduler, n_workers)
+    return _stream_from_dask(parts, task, scheduler, n_workers, progress)
 
 
-def _stream_from_dask(parts, task, scheduler, n_workers) -> Iterator[dict]:
+def _stream_from_dask(parts, task, scheduler, n_workers, progress) -> Iterator[dict]:
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -304,8 +292,9 @@ def _stream_from_dask(parts, task, scheduler, n_workers) -> Iterator[dict]:
         client = Client(scheduler)
     try:
         futures = client.map(_fit_chunk, parts, pure=False, **task)
-        for future in as_completed(futures):
-            yield from future.result()
+        results = (res for future in as_completed(futures) for res in future.result())
+        total = sum(len(p) for p in parts)
+        yield from _counted(results, total, progress, task["sensor"])
     finally:
         client.close()
         if cluster is not None:

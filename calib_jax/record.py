@@ -46,6 +46,7 @@ import numpy as np
 from .calibration import BatchRecord
 from .io.serial import Batch, SerialReader, log_columns
 from .observations import detector_keywords
+from .progress import progress_bar
 from .static import detect_static, distinct_directions
 
 PAPER1_POSES = 48
@@ -156,6 +157,17 @@ class Coverage:
         if self.uses_gyro:
             ok &= not self.turn_axes_missing
         return bool(ok)
+
+    @property
+    def fraction(self) -> float:
+        """How far along to enough, 0 to 1: the lower of poses / target poses and sphere
+        share / target share (below 1 until :attr:`enough`, whatever else is missing)."""
+        parts = [1.0]
+        if self.uses_accel:
+            parts.append(self.poses / self.target_poses)
+        if self.uses_mag:
+            parts.append((self.mag_fraction or 0.0) / self.mag_target)
+        return 1.0 if self.enough else min(min(parts), 0.99)
 
     def missing(self) -> str:
         """What is still missing, in words ('' when enough)."""
@@ -350,6 +362,7 @@ def record_session(
     threshold_factor: float | None = None,
     progress_interval: float = 1.0,
     echo: Callable[[str], None] | None = _stderr,
+    progress: bool | None = None,
     **reader_options,
 ) -> Session:
     """Record from every port at once until time, coverage, devices gone, or Ctrl-C.
@@ -358,6 +371,10 @@ def record_session(
     ``scale``, ``resume``, ``overwrite``, ``max_reconnect_seconds`` ...). Errors a reader
     would raise at the start (an existing log without ``resume``) are raised here, before
     any port is opened.
+
+    ``progress``: a progress bar of the coverage (:attr:`Coverage.fraction`, the least
+    covered device) with the coverage line beside it, in place of a line every
+    ``progress_interval``; None: on a terminal or in a notebook, lines otherwise.
     """
     if sensor not in SENSORS:
         raise ValueError(f"sensor must be one of {SENSORS}, got {sensor!r}")
@@ -389,6 +406,8 @@ def record_session(
     )
     t0 = time.monotonic()
     reason = "devices_gone"
+    bar = progress_bar(100, progress, f"recording {sensor}", unit="%")
+    show = say if bar.disable else (lambda line: _to_bar(bar, devices))
     try:
         for dev in devices:
             dev.thread.start()
@@ -405,7 +424,7 @@ def record_session(
             if now >= next_report:
                 next_report = now + progress_interval
                 _assess(devices, sensor, detector, target_poses, mag_target)
-                say(_progress(devices, now - t0))
+                show(_progress(devices, now - t0))
                 if auto_stop and all(d.coverage is not None and d.coverage.enough for d in devices):
                     reason = "covered"
                     break
@@ -420,6 +439,9 @@ def record_session(
                 dev.reader.close()
     _assess(devices, sensor, detector, target_poses, mag_target)
     elapsed = time.monotonic() - t0
+    if not bar.disable:
+        _to_bar(bar, devices)
+        bar.close()
     say(_progress(devices, elapsed))
     words = {
         "seconds": "time is up",
@@ -470,6 +492,15 @@ def _assess(devices, sensor, detector, target_poses, mag_target) -> None:
             target_poses=target_poses,
             mag_target=mag_target,
         )
+
+
+def _to_bar(bar, devices: list[Device]) -> None:
+    """The bar at the least covered device's share, its coverage line beside it."""
+    least = min(devices, key=lambda d: d.coverage.fraction)
+    bar.n = round(100 * least.coverage.fraction)
+    covered = sum(d.coverage.enough for d in devices)
+    tag = f"{covered}/{len(devices)} covered; least: " if len(devices) > 1 else ""
+    bar.set_postfix_str(tag + least.coverage.line())
 
 
 def _progress(devices: list[Device], elapsed: float) -> str:
@@ -734,6 +765,7 @@ def run(args) -> int:
         resume=args.resume,
         overwrite=args.overwrite,
         max_reconnect_seconds=args.max_reconnect,
+        progress=False if args.no_progress else None,
     )
     # what gets calibrated is each log as it is on disk: this session's lines, plus the earlier
     # ones with --resume; a file this session wrote nothing into is not this session's result

@@ -161,11 +161,16 @@ def test_one_sample_per_observation_has_no_floor_and_no_verdict(tmp_path):
 # ----------------------------------------------------------------------------- real logs
 
 
-def test_xsens_is_at_the_floor_with_nine_parameters():
+def test_xsens_is_at_the_floor_with_nine_parameters(capsys):
     """imu_tk Xsens (38 poses): the issue's analysis found white 0.034 mg, Allan 0.12 mg,
     residual 0.10 mg and nothing to add. Here: white 0.031, Allan 0.098, residual 0.100 (the
-    static detector's intervals differ slightly from that analysis; 25 % bounds)."""
-    d = diagnose_accel(load_log(demo_log_path(), columns="t,ax,ay,az"))
+    static detector's intervals differ slightly from that analysis; 25 % bounds).
+    The progress bar (forced on) counts the one round that found nothing and then reads
+    complete, 1/1, not 1 of the 6 rounds allowed."""
+    d = diagnose_accel(load_log(demo_log_path(), columns="t,ax,ay,az"), progress=True)
+    bar = capsys.readouterr().err
+    assert "diagnosing accel" in bar and "1/1" in bar and "null fits each" in bar, bar
+    assert len(d.rounds) == 1
     assert d.effects == []
     assert d.verdict == "at_floor"
     assert d.n_observations == 38
@@ -304,7 +309,7 @@ def test_marg_misalignment_and_timing(kw, effect):
     from calib_jax.diagnose import diagnose_marg
 
     acc, mag = _marg_log(**kw)
-    d = diagnose_marg(acc, mag, sample_rate=100.0)
+    d = diagnose_marg(acc, mag, sample_rate=100.0, progress=False)
     assert d.effects == ([effect] if effect else []), d.rounds
     assert d.rms_after <= 1.5 * d.noise_floor, d.summary()
     if effect == "sensor_misalignment":
@@ -323,7 +328,7 @@ def test_marg_ckexplorer_through_the_cli(tmp_path):
 
     out = tmp_path / "marg.json"
     rc = main(["diagnose", str(mag_demo_log_path()), "--sensor", "marg", "--json", str(out),
-               "--report", str(tmp_path / "rep")])  # fmt: skip
+               "--report", str(tmp_path / "rep"), "--no-progress"])  # fmt: skip
     assert rc == 0
     d = json.loads(out.read_text())
     assert d["effects"] == ["sensor_misalignment"]

@@ -91,7 +91,7 @@ def test_batch_cli_and_accel_cli_agree_on_a_real_log(tmp_path, capsys):
     assert z.max() < 1e-6, z
 
 
-def test_an_unexpected_error_in_one_file_is_that_files_entry(fleet_dir, monkeypatch):
+def test_an_unexpected_error_in_one_file_is_that_files_entry(fleet_dir, monkeypatch, capsys):
     """Any exception while reading one file (here an IndexError, as a --columns mapping wider
     than the file once raised) becomes that file's load_error entry; the others are fitted."""
     import calib_jax.fleet as fleet
@@ -106,7 +106,11 @@ def test_an_unexpected_error_in_one_file_is_that_files_entry(fleet_dir, monkeypa
         return real(path, **kw)
 
     monkeypatch.setattr(fleet, "load_log", flaky)
-    res = list(calibrate_files(paths, progress=False))
+    res = list(calibrate_files(paths, progress=True))
+    # the progress bar (forced on; off by default when stderr is not a terminal) counts the
+    # files and the one not calibrated
+    bar = capsys.readouterr().err
+    assert "calibrating accel" in bar and "2/2" in bar and "not_calibrated=1" in bar, bar
     assert res[0]["status"] == "load_error" and "IndexError" in res[0]["message"]
     assert paths[0] in res[0]["message"]
     assert res[1]["status"] == "ok"
@@ -212,9 +216,11 @@ def test_dask_local_cluster_gives_the_same_results(fleet_dir, tmp_path, capsys):
     try:
         address = cluster.scheduler_address
         assert address.startswith("tcp://127.0.0.1:")
-        stream = calibrate_files_dask(paths, scheduler=address, chunk=3)
+        stream = calibrate_files_dask(paths, scheduler=address, chunk=3, progress=True)
         assert not isinstance(stream, list)  # an iterator: results come back as chunks finish
         dist = sorted(stream, key=lambda r: r["path"])
+        bar = capsys.readouterr().err  # the progress bar counted every file as chunks came back
+        assert "calibrating accel" in bar and f"{len(paths)}/{len(paths)}" in bar, bar
         out = tmp_path / "fleet.json"
         argv = ["batch", str(d), "--dask", address, "--chunk", "3", "--json", str(out)]
         assert main(argv) == 1  # broken.csv

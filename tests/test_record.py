@@ -44,6 +44,7 @@ def test_paper48_protocol_is_enough():
     cov = assess_coverage(sim.raw, None, sample_rate=sim.sample_rate)
     assert cov.static_intervals == 48 and cov.poses == PAPER1_POSES
     assert cov.faces_missing == [] and cov.octants_missing == [] and cov.enough
+    assert cov.fraction == 1.0
     assert cov.line().endswith("coverage enough")
 
 
@@ -273,8 +274,10 @@ def test_one_dead_board_does_not_cost_the_other_its_calibration(tmp_path, capsys
     assert not dead.with_suffix(".calib.json").exists()
 
 
-def test_resumed_rows_count_towards_the_coverage(tmp_path):
-    """--resume to add the missing poses: the progress counts the poses already in the log."""
+@pytest.mark.parametrize("progress", [False, True])
+def test_resumed_rows_count_towards_the_coverage(tmp_path, capsys, progress):
+    """--resume to add the missing poses: the progress counts the poses already in the log;
+    with the progress bar on, the bar stands at their share of the 48 poses."""
     out = tmp_path / "rec.csv"
     _write_log(out, simulate_session(poses=24, hold=1.0, move=0.3, rate=100.0, seed=4))
     rows = _n_rows(out)
@@ -288,6 +291,7 @@ def test_resumed_rows_count_towards_the_coverage(tmp_path):
             seconds=0.3,
             resume=True,
             echo=lines.append,
+            progress=progress,
             **DETECT,
         )
     finally:
@@ -295,6 +299,13 @@ def test_resumed_rows_count_towards_the_coverage(tmp_path):
         os.close(slave)
     cov = session.devices[0].coverage
     assert cov.samples == rows and cov.poses >= 20, "\n".join(lines)
+    assert 0 < cov.fraction == cov.poses / PAPER1_POSES < 1 and not cov.enough
+    bar = capsys.readouterr().err
+    if progress:
+        share = round(100 * cov.poses / PAPER1_POSES)
+        assert "recording accel" in bar and f"{share}/100" in bar and cov.line() in bar, bar
+    else:
+        assert bar == ""  # the lines went to echo
     assert any(f"{rows} rows from before" in m for m in lines)
     assert _n_rows(out) == rows  # nothing new came, nothing was changed
 

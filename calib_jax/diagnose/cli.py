@@ -34,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
             f"ignored for {args.sensor}",
             file=sys.stderr,
         )
+    progress = False if args.no_progress else None
     if args.sensor == "accel":
         # only the detector options given are passed, so the defaults stay the detector's
         d = diagnose_accel(
@@ -42,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
             block=args.block,
             degree=args.degree,
             seed=args.seed,
+            progress=progress,
             **detector,
         )
     elif args.sensor == "marg":
@@ -59,10 +61,16 @@ def run(args: argparse.Namespace) -> int:
             sample_rate=args.sample_rate or log.sample_rate,
             seed=args.seed,
             source=log.path,
+            progress=progress,
         )
     else:
         d = diagnose_mag(
-            log, model=args.model, sample_rate=args.sample_rate, degree=args.degree, seed=args.seed
+            log,
+            model=args.model,
+            sample_rate=args.sample_rate,
+            degree=args.degree,
+            seed=args.seed,
+            progress=progress,
         )
     print(d.summary())
     if args.json_out:

@@ -43,6 +43,7 @@ from ..lm import is_converged
 from ..models.layout import ALPHA_ENTRIES
 from ..observations import accel_observations, screen_samples
 from ..padding import pad_rows
+from ..progress import finish, progress_bar
 from ..static import detect_rest
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
@@ -476,6 +477,7 @@ def _run(
     floor: float,
     seed: int,
     degree: int,
+    progress: bool | None = None,
 ) -> dict:
     tau, T = obs.tau(), obs.T()
     m = obs.m
@@ -497,7 +499,9 @@ def _run(
     first = np.zeros(m, bool)
     first[order[(np.arange(m) * 8 // m) % 2 == 0]] = True
 
+    bar = progress_bar(MAX_ROUNDS, progress, f"diagnosing {obs.sensor}", unit="round")
     for _ in range(MAX_ROUNDS):
+        bar.set_postfix_str(f"{len(remaining)} candidates, {NULL_SIMS} null fits each")
         log: list[dict] = []
         # --- outliers: reject the worst observation, refit, re-test, one at a time (a
         # gross outlier distorts the fit and would otherwise drag good neighbours out with it)
@@ -612,6 +616,7 @@ def _run(
             if entry["accepted"] and (best is None or dbic > best[1]):
                 best = (c, dbic, fit, d["free"])
         rounds.append(log)
+        bar.update(1)
         if best is None:
             break
         c, _, fit, fc = best
@@ -621,6 +626,8 @@ def _run(
         st = _step("+".join(["base", *effects]), fit, len(rejected))
         st["added_effect"] = c
         steps.append(st)
+    finish(bar)
+    bar.close()
     return {
         "base": base,
         "base_free": base_free,
@@ -870,6 +877,7 @@ def diagnose_accel(
     candidates: tuple[str, ...] = ACCEL_CANDIDATES,
     degree: int = 1,
     seed: int = 0,
+    progress: bool | None = None,
     **static_options,
 ) -> Diagnosis:
     """Close the loop on an accelerometer multi-position log (module docstring).
@@ -891,6 +899,10 @@ def diagnose_accel(
     degree : int
         1: effects linear in their driver (per-axis quadratic for scale_nonlinearity); 2:
         quadratic in time / temperature and cubic nonlinearity.
+    progress : bool, optional
+        A progress bar over the rounds (each fits every candidate, its halves and the null
+        simulations); None: on a terminal or in a notebook only
+        (:func:`calib_jax.progress.progress_bar`).
     static_options
         Passed to :func:`calib_jax.static.detect_static` (window, threshold_factor, ...).
     """
@@ -998,7 +1010,7 @@ def diagnose_accel(
         d.notes.extend(obs.notes)
         return d
     floor = float(np.nanmax([white, allan]))
-    res = _run(obs, cands, floor, seed, degree)
+    res = _run(obs, cands, floor, seed, degree, progress)
     return _finish(obs, res, (white, allan), "mg", source, 1e3)
 
 
@@ -1022,6 +1034,7 @@ def diagnose_mag(
     candidates: tuple[str, ...] = MAG_CANDIDATES,
     degree: int = 1,
     seed: int = 0,
+    progress: bool | None = None,
 ) -> Diagnosis:
     """Close the loop on a magnetometer free-rotation log (module docstring).
 
@@ -1030,6 +1043,7 @@ def diagnose_mag(
     (hard iron only; ``soft_iron`` is then a candidate). Floors, from the longest rest if the
     log has one: the per-sample scatter of the calibrated magnitude about a quadratic trend
     (white) and its Allan deviation at one sample; without a rest, the first-difference noise.
+    ``progress``: a bar over the rounds, as in :func:`diagnose_accel`.
     """
     from ..mag import calibrate_mag
 
@@ -1108,5 +1122,5 @@ def diagnose_mag(
         allan = float("nan")
         obs.notes.append("no rest in the log: white floor from first differences, no Allan floor")
     floor = float(np.nanmax([white, allan]))
-    res = _run(obs, cands, floor, seed, degree)
+    res = _run(obs, cands, floor, seed, degree, progress)
     return _finish(obs, res, (white, allan), "% of the field", source, 1e2)

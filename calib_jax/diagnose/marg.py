@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..lm import lm_solve
+from ..progress import finish, progress_bar
 from ..rotations import describe_permutation, rotvec_to_dcm, signed_permutations
 from ..runtime import disk_jit
 from ..static import detect_rest
@@ -210,13 +211,15 @@ def diagnose_marg(
     static_tol: float = 0.05,
     seed: int = 0,
     source: str | None = None,
+    progress: bool | None = None,
 ) -> Diagnosis:
     """The loop on simultaneous accelerometer and magnetometer samples (module docstring).
 
     ``acc`` and ``mag`` are raw (N, 3); each is calibrated first with
     :func:`calib_jax.calibrate_mag` (``sensor="accel"`` for the accelerometer). Observations
     are quasi-static samples (|a| within ``static_tol`` of g), every k-th to at most
-    ``max_points``. rms values are in radians (the summary prints degrees).
+    ``max_points``. rms values are in radians (the summary prints degrees). ``progress``: a
+    bar over the rounds, as in :func:`calib_jax.diagnose.diagnose_accel`.
     """
     from ..mag import calibrate_mag
 
@@ -280,7 +283,9 @@ def diagnose_marg(
     cur, free, P_cur, effects, steps, rounds = base, base_free.copy(), eye, [], [], []
     steps.append(_step("base", base, 0))
     remaining = ["sensor_misalignment", "timing_offset"]
+    bar = progress_bar(2, progress, "diagnosing marg", unit="round")
     for _ in range(2):
+        bar.set_postfix_str(f"{len(remaining)} candidates, {NULL_SIMS} null fits each")
         rows, idx = [], {}
         th = cur["theta"]
         R_cur = np.asarray(rotvec_to_dcm(jnp.asarray(th[:3] * free[:3]))) @ P_cur
@@ -305,6 +310,7 @@ def diagnose_marg(
         nb = [f["bic"] for f in fits[nb0:]]
         log = [_judge(c, fits, idx[c], nb, cur, P_best) for c in remaining]
         rounds.append(log)
+        bar.update(1)
         accepted = [e for e in log if e["accepted"]]
         if not accepted:
             break
@@ -317,6 +323,8 @@ def diagnose_marg(
         remaining.remove(c)
         steps.append(_step("+".join(["base", *effects]), cur, 0, effect=c))
         steps[-1]["coefficients"] = _coefficients(c, cur, P_cur)
+    finish(bar)
+    bar.close()
     # floors: the angle over the longest rest, with the final model's rotation
     R_fin = np.asarray(rotvec_to_dcm(jnp.asarray(cur["theta"][:3] * free[:3]))) @ P_cur
     Mn = Mn @ R_fin.T
