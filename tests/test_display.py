@@ -190,6 +190,39 @@ def test_figures_mark_the_gaps_and_clip_nothing(tmp_path):
     assert min(edges) <= 0.0 and max(edges) >= 39.0  # percent: the outlier is in range
 
 
+def test_interactive_3d_view_shows_the_points_of_the_figures():
+    """plotly's 3-D view (the 'interactive' extra) holds the same points as the matplotlib
+    figure: the calibrated static means in g, coloured by their radial error in mg, the
+    uncalibrated ones, the unit sphere and exactly the figure's empty cells; a magnetometer
+    view asks for its raw samples and thins them to max_points; the figure writes to HTML."""
+    pytest.importorskip("plotly")  # in the test extra; optional for users
+    from calib_jax.plots import plot_accel, view_3d
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(60, 3))
+    d[:, 2] = np.abs(d[:, 2])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    cal = _accel_cal(static_means=d * 1.01 + 0.01)
+    fig = view_3d(cal)
+    traces = {t.name: t for t in fig.data}
+    assert set(traces) == {"unit sphere", "before", "after", "empty cell"}
+    after = cal.apply(cal.static_means) / cal.g
+    got = np.column_stack([traces["after"].x, traces["after"].y, traces["after"].z])
+    np.testing.assert_allclose(got, after, rtol=1e-12)
+    err_mg = (np.linalg.norm(after, axis=1) - 1.0) * 1e3
+    np.testing.assert_allclose(traces["after"].marker.color, err_mg, rtol=1e-12)
+    [gaps] = [c for c in plot_accel(cal).axes[0].collections if c.get_label() == "empty cell"]
+    assert len(traces["empty cell"].x) == len(gaps.get_offsets()) > 20
+    assert "plotly" in fig.to_html(include_plotlyjs=False)
+
+    raw = rng.normal(size=(10_000, 3)) * 44.3
+    mag = _mag_cal(center=np.zeros(3), soft_iron=np.eye(3), radius=44.3)
+    with pytest.raises(ValueError, match="raw samples"):
+        view_3d(mag)
+    fig = view_3d(mag, raw, max_points=1000)
+    assert len(fig.data[2].x) == 1000 and fig.data[2].name == "after"
+
+
 def test_gyro_html_holds_c_b_the_miss_and_the_candidates():
     from calib_jax.simulate import simulate_gyro_log
 
