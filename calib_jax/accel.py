@@ -22,6 +22,7 @@ of two with zero weights, so logs of similar length share one compilation.
 from __future__ import annotations
 
 import functools
+import os
 import warnings as _warnings
 from collections.abc import Callable
 from typing import Literal
@@ -40,7 +41,7 @@ from .geometry import (
     sqrtm_inv_spd,
 )
 from .implicit import solve_implicit
-from .io.files import SensorLog
+from .io.files import SensorLog, as_log
 from .lm import LMResult, fit_status, lm_solve, status_message
 from .models.accel import ALPHA_ENTRIES, PARAM_NAMES, normalized_sphere_residual
 from .observations import AccelObservations, accel_observations, detection_found
@@ -296,7 +297,7 @@ def check_poses(
 
 
 def calibrate_accel(
-    data: np.ndarray | SensorLog,
+    data: np.ndarray | SensorLog | str | os.PathLike,
     *,
     g: float | None = None,
     units: Units = "auto",
@@ -318,8 +319,9 @@ def calibrate_accel(
 
     Parameters
     ----------
-    data : (N, 3) array or SensorLog
-        Raw readings (any unit) or a loaded log (its ``acc`` and ``sample_rate`` are used).
+    data : (N, 3) array, SensorLog or path
+        Raw readings (any unit), a loaded log (its ``acc`` and ``sample_rate`` are used) or a
+        log file (read with :func:`calib_jax.load_log`, as ``calib-jax accel FILE`` reads it).
     g : float, optional
         Reference magnitude in output units. Default: 1 for g and counts (output in g),
         9.80665 for m/s^2.
@@ -357,6 +359,7 @@ def calibrate_accel(
     """
     log_notes: list[str] = []
     source = None
+    data = as_log(data, "accel")
     if isinstance(data, SensorLog):
         sample_rate = sample_rate or data.sample_rate
         log_notes = list(data.notes)

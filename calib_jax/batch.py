@@ -207,6 +207,11 @@ class BatchResult(eqx.Module):
 
         return to_dataframe(self.rows(names))
 
+    def __repr__(self) -> str:
+        from .display import batch_repr
+
+        return batch_repr("BatchResult", self.sensor, self.statuses)
+
     def _repr_html_(self) -> str:
         from .display import rows_html
 

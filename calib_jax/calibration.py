@@ -942,6 +942,16 @@ class BatchRecord(Record):
     def __len__(self) -> int:
         return len(self.entries)
 
+    def __repr__(self) -> str:
+        from .display import batch_repr
+
+        return batch_repr("BatchRecord", self.sensor, self.statuses)
+
+    def _repr_html_(self) -> str:
+        from .display import batch_record_html
+
+        return batch_record_html(self)
+
     @property
     def statuses(self) -> list[str]:
         return [e.get("status", "failed") for e in self.entries]

@@ -443,6 +443,7 @@ def run_marg(args: argparse.Namespace) -> int:
 def run_gyro(args: argparse.Namespace) -> int:
     _enable_x64()
     from .gyro import calibrate_gyro
+    from .io.files import join_gyro
 
     if args.gyro_file is None:
         log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate)
@@ -457,8 +458,7 @@ def run_gyro(args: argparse.Namespace) -> int:
             args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="accel"
         )
         glog = load_input(args.gyro_file, sample_rate=args.sample_rate, sensor="gyro")
-        _same_clock(args, log, glog)
-        log.gyro = glog.vectors("gyro")
+        log = join_gyro(log, glog)
     cal = calibrate_gyro(
         log,
         units=args.gyro_units,
@@ -474,24 +474,6 @@ def run_gyro(args: argparse.Namespace) -> int:
     print(cal.report())
     _json_out(cal, args.json)
     return 0 if cal.success else 1
-
-
-def _same_clock(args: argparse.Namespace, log, glog) -> None:
-    """Two files of one recording: the same number of rows and, where both have one, the same
-    time column."""
-    import numpy as np
-
-    if len(log) != len(glog):
-        raise ValueError(
-            f"{args.file} has {len(log)} rows and {args.gyro_file} {len(glog)}: the gyro fit "
-            "needs both sensors sample by sample on one clock"
-        )
-    if log.t is not None and glog.t is not None and not np.allclose(log.t, glog.t):
-        worst = float(np.max(np.abs(log.t - glog.t)))
-        raise ValueError(
-            f"the time columns of {args.file} and {args.gyro_file} differ by up to {worst:.3g} "
-            "s: the gyro fit needs both sensors sample by sample on one clock"
-        )
 
 
 def run_apply(args: argparse.Namespace) -> int:

@@ -165,6 +165,23 @@ def gyro_html(cal) -> str:
     return _card(title, cal.status, body + _lists(cal.warnings, cal.notes))
 
 
+def marg_repr(rec) -> str:
+    acc = "none" if rec.accel is None else f"{rec.accel_method} {_short_rms(rec.accel)}"
+    gyro = "" if rec.gyro is None else f", gyro {rec.gyro.rms_after_deg:.3g} deg"
+    return (
+        f"MARGRecord(status={rec.status!r}, accel {acc}, mag {rec.mag.model} "
+        f"{_short_rms(rec.mag)}, rotation {rec.rotation_deg:.3g} deg ({rec.permutation})"
+        f"{gyro}, source={rec.source!r})"
+    )
+
+
+def _short_rms(cal) -> str:
+    """'rms 12.2 % -> 4.36 %' for an ellipsoid, 'rms 1.1e-3 -> 1.0e-4' for paper 1's fit."""
+    if hasattr(cal, "rms_after_pct"):
+        return f"rms {cal.rms_before_pct:.3g} % -> {cal.rms_after_pct:.3g} %"
+    return f"rms {cal.rms_before:.3g} -> {cal.rms_after:.3g}"
+
+
 def marg_html(rec) -> str:
     parts = [f"<div>accelerometer: {escape(rec.accel_method)}</div>"]
     if rec.accel is not None:
@@ -180,10 +197,27 @@ def marg_html(rec) -> str:
 # diagnosis
 
 
+def diagnosis_unit(sensor: str) -> tuple[str, float]:
+    """The unit a diagnosis is shown in and the factor from its stored numbers: mg for the
+    accelerometer (errors in g), % for the magnetometer (radii), degrees for MARG (radians)."""
+    return {"accel": ("mg", 1e3), "mag": ("%", 1e2)}.get(sensor, ("deg", 180 / math.pi))
+
+
+def diagnosis_repr(d) -> str:
+    if d.verdict == "not_possible":
+        return f"Diagnosis(sensor={d.sensor!r}, verdict='not_possible', source={d.source!r})"
+    u, f = diagnosis_unit(d.sensor)
+    return (
+        f"Diagnosis(sensor={d.sensor!r}, verdict={d.verdict!r}, effects={d.effects}, rms "
+        f"{d.rms_before * f:.3g} -> {d.rms_after * f:.3g} {u} (floor {d.noise_floor * f:.3g}), "
+        f"{d.n_observations} {d.observations}, source={d.source!r})"
+    )
+
+
 def diagnosis_html(d) -> str:
     """The steps table (effect added, parameters, RMS, leave-one-out RMS, BIC), the floor and
     the verdict, in the units :meth:`Diagnosis.summary` prints."""
-    u, f = {"accel": ("mg", 1e3), "mag": ("%", 1e2)}.get(d.sensor, ("deg", 180 / math.pi))
+    u, f = diagnosis_unit(d.sensor)
     if d.verdict == "not_possible":
         return _card(f"Diagnosis ({d.sensor})", d.verdict, _lists([], d.notes))
     rows = [
@@ -280,11 +314,42 @@ def write_table(rows: list[dict], path: str | Path) -> Path:
     return path
 
 
+def batch_repr(kind: str, sensor: str, statuses) -> str:
+    """'BatchResult(accel, 4 sensors: 3 ok, 1 no_coverage)'."""
+    from collections import Counter
+
+    counts = ", ".join(f"{n} {s}" for s, n in Counter(statuses).most_common())
+    return f"{kind}({sensor}, {len(statuses)} sensors: {counts or 'none'})"
+
+
+def batch_record_html(rec) -> str:
+    """The count of usable entries and the first rows of :func:`fleet_rows`."""
+    ok, n = int(rec.success.sum()), len(rec)
+    head = f"<b>BatchRecord</b> ({escape(rec.sensor)}): {ok} of {n} entries usable"
+    return head + rows_html(fleet_rows(rec.entries, rec.sensor))
+
+
+def _clipped(v, width: int = 48) -> str:
+    """A table cell: text longer than ``width`` cut, the whole of it shown on hover."""
+    if isinstance(v, str) and len(v) > width:
+        return f'<span title="{escape(v)}">{escape(v[: width - 1])}&hellip;</span>'
+    return _fmt(v)
+
+
 def rows_html(rows: list[dict], limit: int = 20) -> str:
-    """The first ``limit`` rows as an HTML table, with the count of the rest."""
+    """The first ``limit`` rows as an HTML table that scrolls sideways, long text (messages,
+    notes) cut to one line with the whole on hover, and the count of the rest."""
     if not rows:
         return "<div>no rows</div>"
     keys = list(rows[0])
-    body = table(keys, [[r.get(k) for k in keys] for r in rows[:limit]])
+    head = "".join(f"<th>{escape(k)}</th>" for k in keys)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{_clipped(r.get(k))}</td>" for k in keys) + "</tr>"
+        for r in rows[:limit]
+    )
     more = f"<div>... {len(rows) - limit} more rows</div>" if len(rows) > limit else ""
-    return body + more
+    grid = (
+        '<div style="overflow-x:auto"><table style="white-space:nowrap">'
+        f"<tr>{head}</tr>{body}</table></div>"
+    )
+    return f'{_STYLE}<div class="cj">{grid}{more}</div>'

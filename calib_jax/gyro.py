@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -39,7 +40,7 @@ from .calibration import (
     _unsanitize,
     linear_forms,
 )
-from .io.files import SensorLog
+from .io.files import SensorLog, as_log, join_gyro
 from .lm import fit_status, lm_solve, status_message
 from .models.gyro import (
     Motions,
@@ -903,6 +904,12 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     notes: list[str] = []
     source = None
     mag = None  # with a magnetometer, a steady turn about gravity is not taken for a rest
+    data = as_log(data, None if gyro is None else "accel")
+    if gyro is not None and isinstance(data, SensorLog):  # the gyro's own file or readings
+        gyro = as_log(gyro, "gyro")
+        if not isinstance(gyro, SensorLog):
+            gyro = SensorLog(acc=None, gyro=np.asarray(gyro, float), t=data.t)
+        data = join_gyro(data, gyro)
     if isinstance(data, SensorLog):
         acc, g = data.vectors("accel"), data.vectors("gyro")
         mag = None if data.mag is None else np.asarray(data.mag, float)
@@ -1015,8 +1022,8 @@ def _rest_noise(g: np.ndarray, intervals) -> np.ndarray:
 
 
 def calibrate_gyro(
-    data: SensorLog | np.ndarray,
-    gyro: np.ndarray | None = None,
+    data: SensorLog | np.ndarray | str | os.PathLike,
+    gyro: np.ndarray | SensorLog | str | os.PathLike | None = None,
     *,
     t: np.ndarray | None = None,
     sample_rate: float | None = None,
@@ -1035,11 +1042,13 @@ def calibrate_gyro(
 
     Parameters
     ----------
-    data : SensorLog or (N, 3) array
-        A log with accelerometer and gyro columns (and a time column or ``sample_rate``), or
-        the accelerometer readings with ``gyro`` the gyro's on the same clock.
-    gyro : (N, 3) array, optional
-        The gyro readings when ``data`` is an array.
+    data : SensorLog, path or (N, 3) array
+        A log (or log file) with accelerometer and gyro columns (and a time column or
+        ``sample_rate``), or the accelerometer's readings or log with ``gyro`` the gyro's on
+        the same clock.
+    gyro : (N, 3) array, SensorLog or path, optional
+        The gyro readings, or the gyro's own file of the same recording (imu_tk's two files:
+        the same rows, and the same time column where both have one).
     t : (N,) array, optional
         Sample times in seconds (arrays only; a log brings its own).
     sample_rate : float, optional

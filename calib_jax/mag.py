@@ -28,6 +28,7 @@ different parametrisation (W = alpha, c = beta), so both fits agree.
 from __future__ import annotations
 
 import functools
+import os
 import warnings as _warnings
 from typing import Literal
 
@@ -44,7 +45,7 @@ from .geometry import (
     sphere_fit_points,
 )
 from .implicit import solve_implicit
-from .io.files import SensorLog
+from .io.files import SensorLog, as_log
 from .lm import LMResult, fit_status, is_converged, lm_solve, status_message
 from .models.mag import (
     MAG_MODELS,
@@ -257,7 +258,9 @@ def _compiled_moments(solver: str, model: str, options: tuple):
 
 
 def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str]]:
-    """(N, 3) float vectors, the source path and the loader's notes, from an array or a log."""
+    """(N, 3) float vectors, the source path and the loader's notes, from an array, a log
+    or a file."""
+    data = as_log(data, sensor)
     if not isinstance(data, SensorLog):
         x = np.asarray(data, float)
         source, notes = None, []
@@ -376,7 +379,7 @@ def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:
 
 
 def calibrate_mag(
-    data: np.ndarray | SensorLog,
+    data: np.ndarray | SensorLog | str | os.PathLike,
     *,
     model: MagModel = "auto",
     field: float | None = None,
@@ -390,8 +393,8 @@ def calibrate_mag(
 
     Parameters
     ----------
-    data : (N, 3) array or SensorLog
-        Raw vectors (any unit) or a loaded log (its ``mag`` columns, or ``acc`` with
+    data : (N, 3) array, SensorLog or path
+        Raw vectors (any unit), a loaded log or a log file (its ``mag`` columns, or ``acc`` with
         ``sensor="accel"``). Rotate the sensor through as many orientations as possible.
     model : {"auto", "sphere", "diag", "full"}
         Hard iron only (centre and radius), an axis-aligned ellipsoid, a full ellipsoid, or

@@ -35,6 +35,7 @@ from .calibration import (
     _unsanitize,
 )
 from .gyro import GyroCalibration, calibrate_gyro
+from .io.files import as_log
 from .mag import calibrate_mag
 from .models import layout
 from .status import is_usable, worst_status
@@ -209,6 +210,11 @@ class MARGRecord(Record):
         from .display import marg_html
 
         return marg_html(self)
+
+    def __repr__(self) -> str:
+        from .display import marg_repr
+
+        return marg_repr(self)
 
     def to_params(self):
         """The board as a JAX pytree, :class:`calib_jax.pipeline.MargParams`, whose ``apply``
@@ -433,6 +439,7 @@ def calibrate_marg_log(
 
     if accel not in ACCEL_METHODS:
         raise ValueError(f"accel must be one of {ACCEL_METHODS}, got {accel!r}")
+    log = as_log(log)
     if log.acc is None or log.mag is None:
         raise ValueError(
             f"{log.path}: a MARG calibration needs accelerometer and magnetometer columns "

@@ -88,6 +88,9 @@ def test_mag_and_marg_html():
     )
     text = _parsed_text(rec._repr_html_())
     assert "AccelCalibration" in text and "MagCalibration" in text and "dip 60.00" in text
+    short = repr(rec)  # one line with the numbers a user looks for first, not a field dump
+    assert "\n" not in short and len(short) < 250 and "R_mag_to_acc" not in short
+    assert "rotation 0.5 deg (x <- +x, y <- +y, z <- +z)" in short and "10 % -> 0.5 %" in short
 
 
 def test_diagnosis_html_has_the_steps_and_the_candidates():
@@ -117,6 +120,10 @@ def test_diagnosis_html_has_the_steps_and_the_candidates():
     # each step's row: effect, parameters, rms and leave-one-out rms in mg, BIC
     assert "base 9 2 2.1 -500" in text and "bias_drift 12 0.5 0.6 -700" in text
     assert "temperature" in text and "bic, loo" in text  # the failed tests are named
+    assert repr(d) == (
+        "Diagnosis(sensor='accel', verdict='effects_added', effects=['bias_drift'], rms 2 -> "
+        "0.5 mg (floor 0.4), 40 intervals, source=None)"
+    )
 
 
 def test_batch_result_rows_are_its_numbers(tmp_path):
@@ -149,6 +156,15 @@ def test_batch_result_rows_are_its_numbers(tmp_path):
     assert [rows[0][n] for n in PARAM_NAMES] == p[0].tolist()
     text = _parsed_text(r._repr_html_())
     assert "1 of 2 sensors converged" in text
+    assert repr(r) == "BatchResult(accel, 2 sensors: 1 ok, 1 failed)"
+    assert repr(rec) == "BatchRecord(accel, 2 sensors: 1 ok, 1 failed)"
+    # the record (what fleets and `calib-jax batch --json` give) shows its rows too; a long
+    # message is cut to one line in the cell, the whole of it in the cell's hover text
+    rec.entries[1]["message"] = "not fitted: " + "too few valid samples " * 5
+    html = rec._repr_html_()
+    text = _parsed_text(html)
+    assert "1 of 2 entries usable" in text and "a.csv" in text and f"{p[0, 8]:.6g}" in text
+    assert "too few valid samples " * 5 in html and "too few valid samples " * 5 not in text
     pd = pytest.importorskip("pandas")
     frame = r.to_dataframe()
     assert isinstance(frame, pd.DataFrame) and frame.shape[0] == 2

@@ -654,3 +654,26 @@ def test_vendor_prefixed_names_are_recognised(tmp_path):
     log = load_log(path)
     assert log.columns["ax"] == "scaledAccelX" and log.columns["gz"] == "scaledGyroZ"
     np.testing.assert_allclose(log.acc[0], [0.1, 0.2, 0.9])
+
+
+def test_every_fit_takes_a_file_path(tmp_path):
+    """A new user's first call, ``calibrate_accel("log.csv")``, raised a TypeError about
+    float() and a PosixPath. Every fit now loads a path (str or pathlib) with load_log, as the
+    command line does: the same parameters as loading first (bit for bit: the same arrays)."""
+    import calib_jax as cj
+    from calib_jax.datasets import demo_log_path, mag_demo_log_path
+    from calib_jax.marg import calibrate_marg_log
+
+    acc = cj.calibrate_accel(str(demo_log_path()))
+    np.testing.assert_array_equal(acc.params, cj.calibrate_accel(load_log(demo_log_path())).params)
+    assert acc.source == str(demo_log_path())
+    mag = cj.calibrate_mag(mag_demo_log_path())
+    np.testing.assert_array_equal(
+        mag.center, cj.calibrate_mag(load_log(mag_demo_log_path())).center
+    )
+    marg = calibrate_marg_log(mag_demo_log_path())
+    np.testing.assert_array_equal(marg.mag.soft_iron, mag.soft_iron)  # (dates and notes differ)
+    assert marg.source == str(mag_demo_log_path())
+    missing = tmp_path / "nope.csv"
+    with pytest.raises(ValueError, match="nope.csv"):
+        cj.calibrate_accel(missing)

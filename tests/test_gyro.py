@@ -227,6 +227,17 @@ def test_cli_takes_the_two_xsens_files_and_apply_corrects_the_gyro(tmp_path, cap
     np.testing.assert_allclose(
         [float(v) for v in head[1].split(",")[1:]], GyroCalibration.load(out).apply(raw), rtol=1e-9
     )
+    # the Python call takes the same two files (it used to raise a TypeError on a path) and
+    # gives the command's C and b; a gyro file that is not the same recording is refused,
+    # naming both files
+    here = calibrate_gyro(demo_log_path(), gyro_demo_log_path())
+    saved = GyroCalibration.load(out)
+    np.testing.assert_allclose(here.matrix, saved.matrix, rtol=1e-12)
+    np.testing.assert_allclose(here.bias, saved.bias, rtol=1e-12)
+    short = tmp_path / "short_gyro.txt"
+    short.write_text("\n".join(gyro_demo_log_path().read_text().splitlines()[:-10]) + "\n")
+    with pytest.raises(ValueError, match="rows and .*short_gyro.txt.*one clock"):
+        calibrate_gyro(demo_log_path(), short)
 
 
 def test_cli_without_gyro_columns_says_how_to_give_them(capsys):

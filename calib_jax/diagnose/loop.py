@@ -38,7 +38,7 @@ import numpy as np
 from scipy import stats
 
 from ..calibration import Record
-from ..io.files import SensorLog
+from ..io.files import SensorLog, as_log
 from ..lm import is_converged
 from ..models.layout import ALPHA_ENTRIES
 from ..observations import accel_observations, screen_samples
@@ -366,8 +366,16 @@ class Diagnosis(Record):
 
         return diagnosis_html(self)
 
+    def __repr__(self) -> str:
+        from ..display import diagnosis_repr
+
+        return diagnosis_repr(self)
+
     def summary(self) -> str:
-        u, f = {"accel": (" mg", 1e3), "mag": (" %", 1e2)}.get(self.sensor, (" deg", 180 / math.pi))
+        from ..display import diagnosis_unit
+
+        u, f = diagnosis_unit(self.sensor)
+        u = " " + u
         if self.verdict == "not_possible":
             return f"diagnosis ({self.sensor}): not possible\n  note: " + "\n  note: ".join(
                 self.notes
@@ -857,10 +865,7 @@ def _not_possible(sensor, m, need, why, source) -> Diagnosis:
 
 
 def _load(data, sensor):
-    if isinstance(data, (str, bytes)) or hasattr(data, "__fspath__"):
-        from ..io.files import load_log
-
-        data = load_log(data)
+    data = as_log(data)
     if isinstance(data, SensorLog):
         return data.vectors(sensor), data.t, data.temp, data.sample_rate, data.path
     return np.asarray(data, float), None, None, None, None

@@ -938,6 +938,30 @@ def load_log(
     return _assemble(path, tab, mapping, sensor, sample_rate, notes)
 
 
+def as_log(data, sensor: str | None = None):
+    """A file path (str or path-like) loaded with :func:`load_log`; anything else (a
+    :class:`SensorLog`, an array) returned as it is. Every fit's way in, so
+    ``calibrate_accel("log.csv")`` reads the file as ``calib-jax accel log.csv`` does."""
+    if isinstance(data, str | bytes) or hasattr(data, "__fspath__"):
+        return load_log(os.fsdecode(data), sensor=sensor)
+    return data
+
+
+def join_gyro(log: SensorLog, gyro_log: SensorLog) -> SensorLog:
+    """The accelerometer's log with the gyro readings of another file of the same recording
+    (imu_tk's two-file layout), after checking that they share one clock: the same number of
+    rows and, where both have one, the same time column. A ValueError names both files."""
+    a, g = log.path or "the accelerometer's log", gyro_log.path or "the gyro's log"
+    why = "the gyro fit needs both sensors sample by sample on one clock"
+    if len(log) != len(gyro_log):
+        raise ValueError(f"{a} has {len(log)} rows and {g} {len(gyro_log)}: {why}")
+    if log.t is not None and gyro_log.t is not None and not np.allclose(log.t, gyro_log.t):
+        worst = float(np.max(np.abs(log.t - gyro_log.t)))
+        raise ValueError(f"the time columns of {a} and {g} differ by up to {worst:.3g} s: {why}")
+    log.gyro = gyro_log.vectors("gyro")
+    return log
+
+
 def _assemble(
     path: Path,
     tab: _Table,
