@@ -224,7 +224,8 @@ def diagnosis_html(d) -> str:
         [s["added_effect"] or "base", s["n_params"], s["rms"] * f, s["loo_rms"] * f, s["bic"]]
         for s in d.steps
     ]
-    body = table(["step", "params", f"rms ({u})", f"loo rms ({u})", "BIC"], rows)
+    body = "".join(f"<div><b>found:</b> {escape(x)}</div>" for x in d.findings)
+    body += table(["step", "params", f"rms ({u})", f"loo rms ({u})", "BIC"], rows)
     body += (
         f"<div>noise floor {d.noise_floor * f:.4g} {u} (white {d.noise_floor_white * f:.4g}, "
         f"Allan {d.noise_floor_allan * f:.4g}); rms {d.rms_before * f:.4g} &rarr; "

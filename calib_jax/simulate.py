@@ -484,6 +484,22 @@ def plane_turn_quaternions(
     return _dcm_to_quat_np(C.as_matrix())
 
 
+def correlated_noise(
+    n: int, sigma: float, corr: float, rng: np.random.Generator | int = 0, dims: int = 3
+) -> np.ndarray:
+    """(n, dims) stationary AR(1) noise: standard deviation ``sigma``, lag-1 correlation
+    ``corr`` per axis (0: white). A hand's acceleration while turning a board, for
+    ``simulate_marg(linear_acc=...)``: errors correlated over 1 / (1 - corr) samples, the case
+    where a fit's formal standard errors are too small."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(rng)
+    e = rng.normal(size=(n, dims)) * sigma * np.sqrt(1.0 - corr**2)
+    start = rng.normal(size=dims) * sigma
+    x = lfilter([1.0], [1.0, -corr], e, axis=0, zi=(corr * start)[None, :])[0]
+    return x
+
+
 def simulate_marg(
     quat: np.ndarray,
     *,

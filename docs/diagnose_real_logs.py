@@ -138,7 +138,8 @@ def main() -> None:
         # the way in (detector settings and candidates) is in each JSON; the table keeps findings
         way_in = ("no temperature", "angles in", "static detection", "fixed blocks")
         notes = "; ".join(
-            n for n in d.notes if not n.startswith(way_in) and " static intervals, " not in n
+            [f"FOUND: {x}" for x in d.findings]
+            + [n for n in d.notes if not n.startswith(way_in) and " static intervals, " not in n]
         )
         rows.append(
             f"| {name} | {desc} | {d.verdict} | {', '.join(d.effects) or '-'} | "

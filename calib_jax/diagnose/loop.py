@@ -286,8 +286,9 @@ DIAGNOSIS_FORMAT_VERSION = 1
 _JSON_FIELDS = (
     "sensor verdict steps effects rms_before rms_after noise_floor noise_floor_white "
     "noise_floor_allan unexplained_structure structure notes rejected rounds groups "
-    "n_observations observations units source"
+    "n_observations observations units source findings"
 ).split()
+_OPTIONAL_FIELDS = ("source", "findings")  # absent from files written before they existed
 _FLOAT_FIELDS = "rms_before rms_after noise_floor noise_floor_white noise_floor_allan".split()
 
 
@@ -316,6 +317,9 @@ class Diagnosis(Record):
     observations: str
     units: str
     source: str | None = None
+    findings: list[str] = field(default_factory=list)
+    """Discrete structural findings in plain words, printed first (MARG: the magnetometer's
+    axes are a signed permutation of the accelerometer's)."""
     # arrays for the report (not in the JSON)
     obs: Observations | None = None
     theta_base: np.ndarray | None = None
@@ -347,10 +351,11 @@ class Diagnosis(Record):
                 f"{where}diagnosis format_version {version!r} is not supported (this calib_jax "
                 f"reads version {DIAGNOSIS_FORMAT_VERSION})"
             )
-        missing = [k for k in _JSON_FIELDS if k not in d and k != "source"]
+        missing = [k for k in _JSON_FIELDS if k not in d and k not in _OPTIONAL_FIELDS]
         if missing:
             raise ValueError(f"{where}not a diagnosis: missing {', '.join(missing)}")
         kw = {k: d.get(k) for k in _JSON_FIELDS}
+        kw["findings"] = kw["findings"] or []
         for k in (
             "rms_before",
             "rms_after",
@@ -381,6 +386,7 @@ class Diagnosis(Record):
                 self.notes
             )
         lines = [f"diagnosis ({self.sensor}, {self.n_observations} {self.observations}):"]
+        lines += [f"  FOUND: {x}" for x in self.findings]
         for s in self.steps:
             lines.append(
                 f"  {s['added_effect'] or 'base':<20s} params {s['n_params']:>2d}  rms "

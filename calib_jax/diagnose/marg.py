@@ -51,6 +51,21 @@ from .model import fit_each
 N_P = 5  # rotvec (3), theta, dt
 SLOTS = {"sensor_misalignment": [0, 1, 2], "timing_offset": [4]}
 BOUNDS = {"rotation_deg": 15.0, "dt_s": 0.5}
+JACKKNIFE_BLOCKS = 8
+"""Contiguous blocks in time for the candidates' honest standard errors: the refit without
+each block (a block jackknife) sees the correlation of the samples within a block, which the
+formal standard errors of the fit (independent samples) do not."""
+HALVES_STABLE = 0.25
+"""Halves that differ by less than this fraction of the effect's size agree, whatever the
+standard errors say: a large effect stable in sign and size is real for a user."""
+HONEST_ALPHA = 0.01
+"""The effect's coefficients must differ from zero at this level by Hotelling's T^2 with the
+jackknife covariance (F(p, K - p) with K blocks): a significance that holds for correlated
+samples, where BIC, leave-one-out and the null test's likelihoods assume independence."""
+PERMUTATION_MARGIN = 3.0
+"""A signed axis permutation other than the identity is a finding when the spread of the
+gravity-field angle with it is this many times smaller than with the axes as labelled and
+with the next best permutation (other than its negative, which gives the same spread)."""
 
 
 def _interp(t, tm, m):
@@ -133,24 +148,57 @@ def _null_series(a_full, m_full, tm, R, dt, theta, eps_obs, t_obs, rng, L):
     return np.stack([np.interp(tm - dt, tm, back[:, k]) for k in range(3)], axis=1)
 
 
+def block_jackknife_cov(estimates: np.ndarray) -> np.ndarray:
+    """Covariance from the K leave-one-block-out estimates (K, p):
+    (K - 1) / K * sum_k (theta_k - mean)(theta_k - mean)'."""
+    k = len(estimates)
+    d = estimates - estimates.mean(axis=0)
+    return (k - 1) / k * d.T @ d
+
+
+def hotelling_p(theta: np.ndarray, cov: np.ndarray, k: int) -> float:
+    """p-value of theta = 0 with a covariance estimated from k blocks (T^2 -> F(p, k - p))."""
+    from scipy import stats
+
+    p = len(theta)
+    try:
+        t2 = float(theta @ np.linalg.solve(cov, theta))
+    except np.linalg.LinAlgError:
+        return float("nan")
+    return float(stats.f.sf((k - p) / (p * (k - 1)) * t2, p, k - p))
+
+
 def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best) -> dict:
-    """One candidate's round entry: its fit (``fits[i]``), the two halves' fits after it and
-    its null fits after those, against the current model ``cur`` and the null baselines'
-    BIC ``nb``; accepted when every test passes."""
+    """One candidate's round entry: its fit (``fits[i]``), the two halves' fits after it,
+    the :data:`JACKKNIFE_BLOCKS` leave-one-block-out fits after those and its null fits after
+    those, against the current model ``cur`` and the null baselines' BIC ``nb``; accepted
+    when every test passes.
+
+    The halves agree when they differ by less than :data:`HALVES_Z` honest standard errors
+    (the jackknife's, doubled: each half has twice the full log's variance) or by less than
+    :data:`HALVES_STABLE` of the effect's size."""
     fit, h1, h2 = fits[i], fits[i + 1], fits[i + 2]
+    jack = fits[i + 3 : i + 3 + JACKKNIFE_BLOCKS]
+    nulls = fits[i + 3 + JACKKNIFE_BLOCKS : i + 3 + JACKKNIFE_BLOCKS + NULL_SIMS]
     dbic = cur["bic"] - fit["bic"]
-    null_gain = max(nb[k] - fits[i + 3 + k]["bic"] for k in range(NULL_SIMS))
+    null_gain = max(nb[k] - f["bic"] for k, f in enumerate(nulls))
     sl = SLOTS[c]
-    zh = np.abs(h1["theta"][sl] - h2["theta"][sl]) / np.sqrt(
-        h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2
-    )
+    diff = h1["theta"][sl] - h2["theta"][sl]
+    cov = block_jackknife_cov(np.stack([f["theta"][sl] for f in jack]))
+    se_honest = np.sqrt(np.diag(cov))
+    p_honest = hotelling_p(fit["theta"][sl], cov, JACKKNIFE_BLOCKS)
+    z_formal = np.abs(diff) / np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2)
+    zh = np.abs(diff) / (2.0 * se_honest)
+    size = float(np.linalg.norm(fit["theta"][sl]))
+    stable = bool(np.linalg.norm(diff) <= HALVES_STABLE * size)
     rot = math.degrees(float(np.linalg.norm(fit["theta"][:3])))
     plaus = rot <= BOUNDS["rotation_deg"] and abs(fit["theta"][4]) <= BOUNDS["dt_s"]
     tests = {
         "converged": fit["converged"],
         "bic": dbic > BIC_MIN,
         "loo": 1 - fit["loo_rms"] / cur["loo_rms"] > LOO_GAIN,
-        "halves": bool(np.all(np.isfinite(zh)) and np.max(zh) < HALVES_Z),
+        "halves": bool(np.all(np.isfinite(zh)) and (np.max(zh) < HALVES_Z or stable)),
+        "honest": bool(p_honest < HONEST_ALPHA),
         "null": dbic > null_gain,
         "plausible": bool(plaus),
     }
@@ -160,6 +208,11 @@ def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best)
         "delta_bic": dbic,
         "loo_gain": 1 - fit["loo_rms"] / cur["loo_rms"],
         "halves_max_z": float(np.max(zh)),
+        "halves_max_z_formal": float(np.max(z_formal)),
+        "halves_difference_of_size": float(np.linalg.norm(diff)) / max(size, 1e-300),
+        "stderr_honest": se_honest,
+        "p_honest": p_honest,
+        "stderr_formal": fit["stderr"][sl],
         "null_max_delta_bic": null_gain,
         "rms": fit["rms"],
         "loo_rms": fit["loo_rms"],
@@ -173,16 +226,53 @@ def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best)
     return entry
 
 
-def _coefficients(c: str, fit: dict, P) -> dict:
+def _coefficients(c: str, fit: dict, P, honest: np.ndarray) -> dict:
     """An accepted effect's coefficients for its step: the rotation (after the axis map P) or
-    the time offset, with standard errors."""
+    the time offset, with the honest (block jackknife) and the formal standard errors."""
     if c == "sensor_misalignment":
         return {
             "permutation": describe_permutation(P),
             "rotvec_deg": np.degrees(fit["theta"][:3]),
-            "rotvec_stderr_deg": np.degrees(fit["stderr"][:3]),
+            "rotvec_stderr_deg": np.degrees(honest),
+            "rotvec_stderr_formal_deg": np.degrees(fit["stderr"][:3]),
         }
-    return {"dt_s": float(fit["theta"][4]), "dt_stderr_s": float(fit["stderr"][4])}
+    return {
+        "dt_s": float(fit["theta"][4]),
+        "dt_stderr_s": float(honest[0]),
+        "dt_stderr_formal_s": float(fit["stderr"][4]),
+    }
+
+
+def _permutation_finding(Ps: np.ndarray, spreads: np.ndarray, i_best: int) -> dict:
+    """The signed axis permutation search as a round entry: accepted when the best map is not
+    the identity and wins by :data:`PERMUTATION_MARGIN` over the identity and over the next
+    best map (its negative aside: it gives the same spread), with the finding in words."""
+    P = Ps[i_best]
+    same = [i for i, Q in enumerate(Ps) if np.allclose(Q, P) or np.allclose(Q, -P)]
+    ident = int(next(i for i, Q in enumerate(Ps) if np.allclose(Q, np.eye(3))))
+    nxt = float(np.min(np.delete(spreads, same)))
+    best, as_labelled = float(spreads[i_best]), float(spreads[ident])
+    margin = min(as_labelled, nxt) / max(best, 1e-300)
+    accepted = i_best not in (ident,) and margin >= PERMUTATION_MARGIN
+    words = describe_permutation(P)
+    text = (
+        f"the magnetometer's axes are not the accelerometer's: {words} (the gravity-field "
+        f"angle spreads {math.degrees(best):.2g} deg with this map, "
+        f"{math.degrees(as_labelled):.2g} deg with the axes as labelled and "
+        f"{math.degrees(nxt):.2g} deg with the next best map); map the magnetometer's axes "
+        "this way before fusing the two sensors"
+    )
+    return {
+        "effect": "axis_permutation",
+        "accepted": bool(accepted),
+        "permutation": words,
+        "spread_deg": math.degrees(best),
+        "spread_as_labelled_deg": math.degrees(as_labelled),
+        "spread_next_deg": math.degrees(nxt),
+        "margin": margin,
+        "tests": {"not_identity": i_best != ident, "margin": bool(margin >= PERMUTATION_MARGIN)},
+        "text": text if accepted else "",
+    }
 
 
 def _angle_floors(A, Afn, Mn, sample_rate, ok) -> tuple[float, float, str]:
@@ -274,14 +364,27 @@ def diagnose_marg(
     Ps = signed_permutations()
     spreads = np.array([np.std(np.sum(a * (Mn[keep] @ P.T), axis=1)) for P in Ps])
     det_tie = np.where(np.linalg.det(Ps) > 0, 0.0, 1.0)
-    P_best = Ps[int(np.lexsort((det_tie, np.round(spreads, 12)))[0])]
+    i_best = int(np.lexsort((det_tie, np.round(spreads, 12)))[0])
+    P_best = Ps[i_best]
     notes = ["angles in radians in the JSON; the summary prints degrees"]
+    perm = _permutation_finding(Ps, spreads, i_best)
     order = np.arange(m)
     first = (order * 8 // m) % 2 == 0
+    block = order * JACKKNIFE_BLOCKS // m  # contiguous in time
     rng = np.random.default_rng(seed)
     L = max(1, int(round(m ** (1 / 3))))
     cur, free, P_cur, effects, steps, rounds = base, base_free.copy(), eye, [], [], []
     steps.append(_step("base", base, 0))
+    findings = []
+    if perm["accepted"]:
+        # a discrete finding, taken before the rounds: the candidates then fit what is left
+        P_cur = P_best
+        th0 = np.array([0, 0, 0, float(np.mean(_angles(a, Mn[keep] @ P_best.T))), 0.0])
+        [cur] = _run([(th0, Mf, P_best, w, base_free)], a, tob, tm)
+        effects.append("axis_permutation")
+        steps.append(_step("base+axis_permutation", cur, 0, effect="axis_permutation"))
+        steps[-1]["coefficients"] = {"permutation": perm["permutation"]}
+        findings.append(perm["text"])
     remaining = ["sensor_misalignment", "timing_offset"]
     bar = progress_bar(2, progress, "diagnosing marg", unit="round")
     for _ in range(2):
@@ -303,18 +406,22 @@ def diagnose_marg(
                 (th, Mf, P, w * first, fc),
                 (th, Mf, P, w * ~first, fc),
             ]
+            rows += [(th, Mf, P, w * (block != b), fc) for b in range(JACKKNIFE_BLOCKS)]
             rows += [(th, nm, P, w, fc) for nm in nulls]
         nb0 = len(rows)
         rows += [(th, nm, P_cur, w, free) for nm in nulls]
         fits = _run(rows, a, tob, tm)
         nb = [f["bic"] for f in fits[nb0:]]
         log = [_judge(c, fits, idx[c], nb, cur, P_best) for c in remaining]
+        if not rounds:
+            log.insert(0, perm)  # the permutation search, accepted or not, in the JSON
         rounds.append(log)
         bar.update(1)
-        accepted = [e for e in log if e["accepted"]]
+        accepted = [e for e in log if e["accepted"] and e["effect"] in remaining]
         if not accepted:
             break
-        c = max(accepted, key=lambda e: e["delta_bic"])["effect"]
+        best = max(accepted, key=lambda e: e["delta_bic"])
+        c = best["effect"]
         cur = fits[idx[c]]
         free[SLOTS[c]] = True
         if c == "sensor_misalignment":
@@ -322,7 +429,7 @@ def diagnose_marg(
         effects.append(c)
         remaining.remove(c)
         steps.append(_step("+".join(["base", *effects]), cur, 0, effect=c))
-        steps[-1]["coefficients"] = _coefficients(c, cur, P_cur)
+        steps[-1]["coefficients"] = _coefficients(c, cur, P_cur, best["stderr_honest"])
     finish(bar)
     bar.close()
     # floors: the angle over the longest rest, with the final model's rotation
@@ -388,6 +495,7 @@ def diagnose_marg(
         observations=obs.kind,
         units="radians (angle between gravity and field)",
         source=source,
+        findings=findings,
         obs=obs,
         theta_base=base["theta"],
         theta_final=cur["theta"],

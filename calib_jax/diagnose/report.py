@@ -96,7 +96,8 @@ def residual_motion(d: Diagnosis) -> Figure:
 
 
 def model_comparison(d: Diagnosis) -> Figure:
-    rows = [(r, e) for r, log in enumerate(d.rounds) for e in log if e["effect"] != "outliers"]
+    skip = ("outliers", "axis_permutation")  # not fits with a BIC: the summary reports them
+    rows = [(r, e) for r, log in enumerate(d.rounds) for e in log if e["effect"] not in skip]
     fig = Figure(figsize=(10, 1.2 + 0.35 * max(len(rows), 1)), layout="constrained")
     axs = fig.subplots(1, 4, sharey=True)
     labels = [f"round {r + 1}: {e['effect']}" for r, e in rows]
