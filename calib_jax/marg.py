@@ -196,6 +196,10 @@ class MARGRecord(Record):
     acc_plane: PlaneAlignment | None = None
     """Paper 2's sensor-plane alignment of the accelerometer (from a turn log), or None."""
     mag_plane: PlaneAlignment | None = None
+    dip_stderr_honest_deg: float = float("nan")
+    """The dip's standard error from a block jackknife over the log (honest for a tumble's
+    correlated samples; ``dip_stderr_deg`` is the fit's formal one, which assumes independent
+    samples). NaN in records written before it existed."""
     gyro: GyroCalibration | None = None
     """The gyroscope, when the log has gyro columns and static poses with turns between them
     (:func:`calib_jax.calibrate_gyro`, in the accelerometer's frame); else None and a warning
@@ -288,7 +292,8 @@ class MARGRecord(Record):
         return (
             f"accel-mag alignment on {self.n_used} of {self.n_total} samples (|a|, |m| within "
             f"5 % of their medians): axes {self.permutation}; rotation {self.rotation_deg:.2f} "
-            f"deg; dip {self.dip_deg:.2f} +- {self.dip_stderr_deg:.2f} deg; spread of the "
+            f"deg; dip {self.dip_deg:.2f} +- {self.dip_stderr_honest_deg:.2f} deg (block "
+            f"jackknife; formal +- {self.dip_stderr_deg:.2f}); spread of the "
             f"gravity-field angle {self.dip_std_before_deg:.2f} -> {self.dip_std_after_deg:.2f} "
             f"deg; {self.alignment_message}"
         )
@@ -325,6 +330,7 @@ class MARGRecord(Record):
                 "rotation_deg": self.rotation_deg,
                 "dip_deg": self.dip_deg,
                 "dip_stderr_deg": self.dip_stderr_deg,
+                "dip_stderr_honest_deg": self.dip_stderr_honest_deg,
                 "dip_std_before_deg": self.dip_std_before_deg,
                 "dip_std_after_deg": self.dip_std_after_deg,
                 "n_used": self.n_used,
@@ -375,6 +381,7 @@ class MARGRecord(Record):
             rotation_deg=float(d["rotation_deg"]),
             dip_deg=float(d["dip_deg"]),
             dip_stderr_deg=float(d["dip_stderr_deg"]),
+            dip_stderr_honest_deg=float(_unsanitize(d.get("dip_stderr_honest_deg", "nan"))),
             dip_std_before_deg=float(d["dip_std_before_deg"]),
             dip_std_after_deg=float(d["dip_std_after_deg"]),
             n_used=int(d["n_used"]),
@@ -543,6 +550,7 @@ def _record(
         rotation_deg=float(al.rotation_deg),
         dip_deg=float(al.dip_deg),
         dip_stderr_deg=float(al.dip_stderr_deg),
+        dip_stderr_honest_deg=float(al.dip_stderr_honest_deg),
         dip_std_before_deg=float(al.spread_before_deg),
         dip_std_after_deg=float(al.spread_after_deg),
         n_used=int(al.n_used),

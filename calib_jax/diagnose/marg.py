@@ -8,14 +8,21 @@ the two sensors share a frame and a clock:
 
 with R = I, P = I, dt = 0 in the base model (theta alone is fitted). Candidates:
 
-* ``sensor_misalignment``: the 48 signed axis permutations are scored first (the spread of
-  a . P m), then R = exp([v]x) (3 parameters) is fitted with the best P;
+* ``axis_permutation`` (a finding, not a fit): the 48 signed axis permutations are scored by
+  the spread of a . P m (:func:`calib_jax.align.permutation_search`); a map other than the
+  identity that wins by 3x over the identity and the next map is taken first and reported
+  in words (``Diagnosis.findings``);
+* ``sensor_misalignment``: R = exp([v]x) (3 parameters) after the best P;
 * ``timing_offset``: dt (1 parameter), the magnetometer interpolated linearly between its
   samples (the full-rate series, so dt is not limited to the observation spacing).
 
-The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, leave-one-out, split
-halves, a null test with block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond
-the permutation, |dt| <= 0.5 s), and the floors come from the longest rest.
+The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, leave-one-out, a null
+test with block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond the permutation,
+|dt| <= 0.5 s) with honest errors where samples are correlated (a tumble's are): a block
+jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS` stretches of the log gives each
+candidate's standard errors; the split halves agree within :data:`HALVES_Z` of them or within
+:data:`HALVES_STABLE` of the effect's size, and Hotelling's T^2 with the jackknife covariance
+rejects zero at :data:`HONEST_ALPHA`. The floors come from the longest rest.
 """
 
 from __future__ import annotations
@@ -26,9 +33,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..align import (
+    JACKKNIFE_BLOCKS,
+    PERMUTATION_MARGIN,
+    block_jackknife_cov,
+    permutation_search,
+    time_blocks,
+)
 from ..lm import lm_solve
 from ..progress import finish, progress_bar
-from ..rotations import describe_permutation, rotvec_to_dcm, signed_permutations
+from ..rotations import describe_permutation, rotvec_to_dcm
 from ..runtime import disk_jit
 from ..static import detect_rest
 from .floors import allan_deviation
@@ -51,10 +65,6 @@ from .model import fit_each
 N_P = 5  # rotvec (3), theta, dt
 SLOTS = {"sensor_misalignment": [0, 1, 2], "timing_offset": [4]}
 BOUNDS = {"rotation_deg": 15.0, "dt_s": 0.5}
-JACKKNIFE_BLOCKS = 8
-"""Contiguous blocks in time for the candidates' honest standard errors: the refit without
-each block (a block jackknife) sees the correlation of the samples within a block, which the
-formal standard errors of the fit (independent samples) do not."""
 HALVES_STABLE = 0.25
 """Halves that differ by less than this fraction of the effect's size agree, whatever the
 standard errors say: a large effect stable in sign and size is real for a user."""
@@ -62,10 +72,6 @@ HONEST_ALPHA = 0.01
 """The effect's coefficients must differ from zero at this level by Hotelling's T^2 with the
 jackknife covariance (F(p, K - p) with K blocks): a significance that holds for correlated
 samples, where BIC, leave-one-out and the null test's likelihoods assume independence."""
-PERMUTATION_MARGIN = 3.0
-"""A signed axis permutation other than the identity is a finding when the spread of the
-gravity-field angle with it is this many times smaller than with the axes as labelled and
-with the next best permutation (other than its negative, which gives the same spread)."""
 
 
 def _interp(t, tm, m):
@@ -146,14 +152,6 @@ def _null_series(a_full, m_full, tm, R, dt, theta, eps_obs, t_obs, rng, L):
     back = new @ R  # to the magnetometer frame
     # undo the time shift: the simulated series at time s is "back" at s - dt
     return np.stack([np.interp(tm - dt, tm, back[:, k]) for k in range(3)], axis=1)
-
-
-def block_jackknife_cov(estimates: np.ndarray) -> np.ndarray:
-    """Covariance from the K leave-one-block-out estimates (K, p):
-    (K - 1) / K * sum_k (theta_k - mean)(theta_k - mean)'."""
-    k = len(estimates)
-    d = estimates - estimates.mean(axis=0)
-    return (k - 1) / k * d.T @ d
 
 
 def hotelling_p(theta: np.ndarray, cov: np.ndarray, k: int) -> float:
@@ -243,35 +241,20 @@ def _coefficients(c: str, fit: dict, P, honest: np.ndarray) -> dict:
     }
 
 
-def _permutation_finding(Ps: np.ndarray, spreads: np.ndarray, i_best: int) -> dict:
-    """The signed axis permutation search as a round entry: accepted when the best map is not
-    the identity and wins by :data:`PERMUTATION_MARGIN` over the identity and over the next
-    best map (its negative aside: it gives the same spread), with the finding in words."""
-    P = Ps[i_best]
-    same = [i for i, Q in enumerate(Ps) if np.allclose(Q, P) or np.allclose(Q, -P)]
-    ident = int(next(i for i, Q in enumerate(Ps) if np.allclose(Q, np.eye(3))))
-    nxt = float(np.min(np.delete(spreads, same)))
-    best, as_labelled = float(spreads[i_best]), float(spreads[ident])
-    margin = min(as_labelled, nxt) / max(best, 1e-300)
-    accepted = i_best not in (ident,) and margin >= PERMUTATION_MARGIN
-    words = describe_permutation(P)
-    text = (
-        f"the magnetometer's axes are not the accelerometer's: {words} (the gravity-field "
-        f"angle spreads {math.degrees(best):.2g} deg with this map, "
-        f"{math.degrees(as_labelled):.2g} deg with the axes as labelled and "
-        f"{math.degrees(nxt):.2g} deg with the next best map); map the magnetometer's axes "
-        "this way before fusing the two sensors"
-    )
+def _permutation_entry(search) -> dict:
+    """The permutation search as a round entry (in the JSON whether accepted or not)."""
     return {
         "effect": "axis_permutation",
-        "accepted": bool(accepted),
-        "permutation": words,
-        "spread_deg": math.degrees(best),
-        "spread_as_labelled_deg": math.degrees(as_labelled),
-        "spread_next_deg": math.degrees(nxt),
-        "margin": margin,
-        "tests": {"not_identity": i_best != ident, "margin": bool(margin >= PERMUTATION_MARGIN)},
-        "text": text if accepted else "",
+        "accepted": search.found,
+        "permutation": describe_permutation(search.permutation),
+        "spread": float(search.spreads[search.index]),
+        "spread_as_labelled": search.spread_as_labelled,
+        "spread_next": search.spread_next,
+        "margin": search.margin,
+        "tests": {
+            "not_identity": not search.is_identity,
+            "margin": search.margin >= PERMUTATION_MARGIN,
+        },
     }
 
 
@@ -361,22 +344,19 @@ def diagnose_marg(
     w = np.ones(m)
     [base] = _run([(np.array([0, 0, 0, theta0, 0.0]), Mf, eye, w, base_free)], a, tob, tm)
     # permutation search for the misalignment candidate
-    Ps = signed_permutations()
-    spreads = np.array([np.std(np.sum(a * (Mn[keep] @ P.T), axis=1)) for P in Ps])
-    det_tie = np.where(np.linalg.det(Ps) > 0, 0.0, 1.0)
-    i_best = int(np.lexsort((det_tie, np.round(spreads, 12)))[0])
-    P_best = Ps[i_best]
+    search = permutation_search(a, Mn[keep])
+    P_best = search.permutation
     notes = ["angles in radians in the JSON; the summary prints degrees"]
-    perm = _permutation_finding(Ps, spreads, i_best)
+    perm = _permutation_entry(search)
     order = np.arange(m)
     first = (order * 8 // m) % 2 == 0
-    block = order * JACKKNIFE_BLOCKS // m  # contiguous in time
+    block = time_blocks(m)  # contiguous in time
     rng = np.random.default_rng(seed)
     L = max(1, int(round(m ** (1 / 3))))
     cur, free, P_cur, effects, steps, rounds = base, base_free.copy(), eye, [], [], []
     steps.append(_step("base", base, 0))
     findings = []
-    if perm["accepted"]:
+    if search.found:
         # a discrete finding, taken before the rounds: the candidates then fit what is left
         P_cur = P_best
         th0 = np.array([0, 0, 0, float(np.mean(_angles(a, Mn[keep] @ P_best.T))), 0.0])
@@ -384,7 +364,7 @@ def diagnose_marg(
         effects.append("axis_permutation")
         steps.append(_step("base+axis_permutation", cur, 0, effect="axis_permutation"))
         steps[-1]["coefficients"] = {"permutation": perm["permutation"]}
-        findings.append(perm["text"])
+        findings.append(search.finding())
     remaining = ["sensor_misalignment", "timing_offset"]
     bar = progress_bar(2, progress, "diagnosing marg", unit="round")
     for _ in range(2):
