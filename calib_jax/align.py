@@ -274,6 +274,9 @@ class PermutationSearch:
     spread_as_labelled: float
     spread_next: float
     """The best spread among the maps other than the chosen one and its negative."""
+    angle_spreads_deg: tuple[float, float, float]
+    """The standard deviation of the gravity-field angle itself (degrees) with the chosen
+    map, with the axes as labelled and with the next best map."""
 
     @property
     def margin(self) -> float:
@@ -291,15 +294,13 @@ class PermutationSearch:
 
     def finding(self) -> str:
         """The finding in plain words (spreads of the angle, degrees, to first order)."""
-        deg = np.degrees
+        best, labelled, nxt = self.angle_spreads_deg
         return (
             "the magnetometer's axes are not the accelerometer's: "
-            f"{describe_permutation(self.permutation)} (the spread of cos(gravity-field angle) "
-            f"is {self.spreads[self.index]:.2g} with this map, {self.spread_as_labelled:.2g} "
-            f"with the axes as labelled and {self.spread_next:.2g} with the next best map, "
-            f"{deg(self.spreads[self.index]):.2g} / {deg(self.spread_as_labelled):.2g} / "
-            f"{deg(self.spread_next):.2g} deg near 90 deg); map the magnetometer's axes this "
-            "way before fusing the two sensors"
+            f"{describe_permutation(self.permutation)} (the angle between gravity and the "
+            f"field varies by {best:.2g} deg with this map, {labelled:.2g} deg with the axes "
+            f"as labelled and {nxt:.2g} deg with the next best map); map the magnetometer's "
+            "axes this way before fusing the two sensors"
         )
 
 
@@ -322,12 +323,18 @@ def permutation_search(
     P = Ps[best]
     same = [i for i, Q in enumerate(Ps) if np.allclose(Q, P) or np.allclose(Q, -P)]
     ident = next(i for i, Q in enumerate(Ps) if np.allclose(Q, np.eye(3)))
+    others = np.setdiff1d(np.arange(len(Ps)), same)
+    nxt = int(others[np.argmin(spreads[others])])
+    angle = [
+        float(np.degrees(np.std(np.arccos(np.clip(dots[i], -1, 1))))) for i in (best, ident, nxt)
+    ]
     return PermutationSearch(
         permutation=P,
         index=best,
         spreads=spreads,
         spread_as_labelled=float(spreads[ident]),
-        spread_next=float(np.min(np.delete(spreads, same))),
+        spread_next=float(spreads[nxt]),
+        angle_spreads_deg=(angle[0], angle[1], angle[2]),
     )
 
 
