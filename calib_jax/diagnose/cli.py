@@ -35,17 +35,11 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     progress = False if args.no_progress else None
+    common = dict(sample_rate=args.sample_rate, degree=args.degree, seed=args.seed)
+    common["progress"] = progress
     if args.sensor == "accel":
         # only the detector options given are passed, so the defaults stay the detector's
-        d = diagnose_accel(
-            log,
-            sample_rate=args.sample_rate,
-            block=args.block,
-            degree=args.degree,
-            seed=args.seed,
-            progress=progress,
-            **detector,
-        )
+        d = diagnose_accel(log, block=args.block, **common, **detector)
     elif args.sensor == "marg":
         from .marg import diagnose_marg
 
@@ -64,14 +58,7 @@ def run(args: argparse.Namespace) -> int:
             progress=progress,
         )
     else:
-        d = diagnose_mag(
-            log,
-            model=args.model,
-            sample_rate=args.sample_rate,
-            degree=args.degree,
-            seed=args.seed,
-            progress=progress,
-        )
+        d = diagnose_mag(log, model=args.model, **common)
     print(d.summary())
     if args.json_out:
         text = json.dumps(d.to_dict(), indent=2)
