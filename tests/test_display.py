@@ -113,9 +113,10 @@ def test_diagnosis_html_has_the_steps_and_the_candidates():
         rms_before=2e-3, rms_after=5e-4, noise_floor=4e-4, noise_floor_white=4e-4,
         noise_floor_allan=4.5e-4, unexplained_structure=False, structure=[], notes=["n1"],
         rejected=[], rounds=rounds, groups={}, n_observations=40, observations="intervals",
-        units="g",
+        units="g", findings=["the magnetometer's axes are not the accelerometer's: x <- +y"],
     )  # fmt: skip
     text = _parsed_text(d._repr_html_())
+    assert text.index("found:") < text.index("magnetometer's axes") < text.index("base 9")
     assert "bias_drift" in text and "base" in text and "effects_added" in text
     # each step's row: effect, parameters, rms and leave-one-out rms in mg, BIC
     assert "base 9 2 2.1 -500" in text and "bias_drift 12 0.5 0.6 -700" in text
