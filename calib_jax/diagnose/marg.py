@@ -16,9 +16,10 @@ with R = I, P = I, dt = 0 in the base model (theta alone is fitted). Candidates:
 * ``timing_offset``: dt (1 parameter), the magnetometer interpolated linearly between its
   samples (the full-rate series, so dt is not limited to the observation spacing).
 
-The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, leave-one-out, a null
-test with block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond the permutation,
-|dt| <= 0.5 s) with honest errors where samples are correlated (a tumble's are): a block
+The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, a null test with
+block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond the permutation, |dt| <=
+0.5 s), with held-out blocks in place of leave-one-out and honest errors where samples are
+correlated (a tumble's are): a block
 jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS` stretches of the log gives each
 candidate's standard errors; the split halves agree within :data:`HALVES_Z` of them or within
 :data:`HALVES_STABLE` of the effect's size, and Hotelling's T^2 with the jackknife covariance
@@ -166,7 +167,15 @@ def hotelling_p(theta: np.ndarray, cov: np.ndarray, k: int) -> float:
     return float(stats.f.sf((k - p) / (p * (k - 1)) * t2, p, k - p))
 
 
-def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best) -> dict:
+def held_out_rms(jack: list[dict], block: np.ndarray, w: np.ndarray) -> float:
+    """RMS of each block's errors predicted by the fit without that block: what the model
+    predicts on data it has not seen, where a tumble's neighbouring samples (which single-sample
+    leave-one-out keeps in the fit) are correlated."""
+    e = np.concatenate([f["e"][(block == b) & (w > 0)] for b, f in enumerate(jack)])
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def _judge(c, fits: list[dict], i: int, nb: list[float], cur: dict, held_cur, block, w, P_best):
     """One candidate's round entry: its fit (``fits[i]``), the two halves' fits after it,
     the :data:`JACKKNIFE_BLOCKS` leave-one-block-out fits after those and its null fits after
     those, against the current model ``cur`` and the null baselines' BIC ``nb``; accepted
@@ -174,7 +183,10 @@ def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best)
 
     The halves agree when they differ by less than :data:`HALVES_Z` honest standard errors
     (the jackknife's, doubled: each half has twice the full log's variance) or by less than
-    :data:`HALVES_STABLE` of the effect's size."""
+    :data:`HALVES_STABLE` of the effect's size. Prediction is judged on held-out blocks (each
+    block's errors from the fit without it, :func:`held_out_rms`, against the current model's
+    ``held_cur``) instead of single-sample leave-one-out, which keeps a left-out sample's
+    correlated neighbours in the fit."""
     fit, h1, h2 = fits[i], fits[i + 1], fits[i + 2]
     jack = fits[i + 3 : i + 3 + JACKKNIFE_BLOCKS]
     nulls = fits[i + 3 + JACKKNIFE_BLOCKS : i + 3 + JACKKNIFE_BLOCKS + NULL_SIMS]
@@ -185,6 +197,7 @@ def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best)
     cov = block_jackknife_cov(np.stack([f["theta"][sl] for f in jack]))
     se_honest = np.sqrt(np.diag(cov))
     p_honest = hotelling_p(fit["theta"][sl], cov, JACKKNIFE_BLOCKS)
+    held = held_out_rms(jack, block, w)
     z_formal = np.abs(diff) / np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2)
     zh = np.abs(diff) / (2.0 * se_honest)
     size = float(np.linalg.norm(fit["theta"][sl]))
@@ -194,7 +207,7 @@ def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best)
     tests = {
         "converged": fit["converged"],
         "bic": dbic > BIC_MIN,
-        "loo": 1 - fit["loo_rms"] / cur["loo_rms"] > LOO_GAIN,
+        "held_out": 1 - held / held_cur > LOO_GAIN,
         "halves": bool(np.all(np.isfinite(zh)) and (np.max(zh) < HALVES_Z or stable)),
         "honest": bool(p_honest < HONEST_ALPHA),
         "null": dbic > null_gain,
@@ -205,6 +218,7 @@ def _judge(c: str, fits: list[dict], i: int, nb: list[float], cur: dict, P_best)
         "accepted": all(tests.values()),
         "delta_bic": dbic,
         "loo_gain": 1 - fit["loo_rms"] / cur["loo_rms"],
+        "held_out_gain": 1 - held / held_cur,
         "halves_max_z": float(np.max(zh)),
         "halves_max_z_formal": float(np.max(z_formal)),
         "halves_difference_of_size": float(np.linalg.norm(diff)) / max(size, 1e-300),
@@ -390,9 +404,12 @@ def diagnose_marg(
             rows += [(th, nm, P, w, fc) for nm in nulls]
         nb0 = len(rows)
         rows += [(th, nm, P_cur, w, free) for nm in nulls]
+        jb0 = len(rows)  # the current model without each block: its held-out errors
+        rows += [(th, Mf, P_cur, w * (block != b), free) for b in range(JACKKNIFE_BLOCKS)]
         fits = _run(rows, a, tob, tm)
-        nb = [f["bic"] for f in fits[nb0:]]
-        log = [_judge(c, fits, idx[c], nb, cur, P_best) for c in remaining]
+        nb = [f["bic"] for f in fits[nb0:jb0]]
+        held_cur = held_out_rms(fits[jb0:], block, w)
+        log = [_judge(c, fits, idx[c], nb, cur, held_cur, block, w, P_best) for c in remaining]
         if not rounds:
             log.insert(0, perm)  # the permutation search, accepted or not, in the JSON
         rounds.append(log)
