@@ -159,9 +159,10 @@ def markdown(rows, meta) -> str:
 def figure(rows, path: Path) -> None:
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(10, 3.8))
-    for k, part in enumerate(("misalignment", "timing")):
-        ax = fig.add_subplot(1, 2, k + 1)
+    parts = [p for p in ("misalignment", "timing") if any(r["part"] == p for r in rows)]
+    fig = Figure(figsize=(5 * max(len(parts), 1), 3.8))
+    for k, part in enumerate(parts):
+        ax = fig.add_subplot(1, len(parts), k + 1)
         for noise in NOISE:
             for corr in CORRELATION:
                 pts = [

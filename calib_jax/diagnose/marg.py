@@ -29,6 +29,7 @@ rejects zero at :data:`HONEST_ALPHA`. The floors come from the longest rest.
 from __future__ import annotations
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -41,6 +42,7 @@ from ..align import (
     permutation_search,
     time_blocks,
 )
+from ..calibration import FitStatusWarning
 from ..lm import lm_solve
 from ..progress import finish, progress_bar
 from ..rotations import describe_permutation, rotvec_to_dcm
@@ -317,17 +319,20 @@ def diagnose_marg(
     N = len(acc)
     t = np.arange(N) / (sample_rate or 1.0) if t is None else np.asarray(t, float)
     ok = np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
-    ca = calibrate_mag(acc[ok], sensor="accel", field=1.0, model="full")
-    cm = calibrate_mag(mag[ok], model="full")
+    with warnings.catch_warnings():  # a failed fit's reasons are in the verdict below
+        warnings.simplefilter("ignore", FitStatusWarning)
+        ca = calibrate_mag(acc[ok], sensor="accel", field=1.0, model="full")
+        cm = calibrate_mag(mag[ok], model="full")
     for name, c in (("accelerometer", ca), ("magnetometer", cm)):
         if c.status in ("failed", "not_converged"):
             return _not_possible(
                 "marg",
                 int(ok.sum()),
                 "a converged ellipsoid for each sensor",
-                f"the {name} ellipsoid fit is '{c.status}' ({c.solver_message}); the angle "
-                "between miscalibrated vectors says nothing about alignment or timing. Record "
-                "more orientations (both hemispheres)",
+                f"the {name} ellipsoid fit is '{c.status}' ("
+                + ("; ".join(c.warnings) or c.solver_message)
+                + "); the angle between miscalibrated vectors says nothing about alignment or "
+                "timing. Record more orientations (both hemispheres)",
                 source,
             )
     A = (acc - ca.center) @ np.asarray(ca.soft_iron).T
