@@ -19,11 +19,11 @@ with R = I, P = I, dt = 0 in the base model (theta alone is fitted). Candidates:
 The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, a null test with
 block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond the permutation, |dt| <=
 0.5 s), with held-out blocks in place of leave-one-out and honest errors where samples are
-correlated (a tumble's are): a block
-jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS` stretches of the log gives each
-candidate's standard errors; the split halves agree within :data:`HALVES_Z` of them or within
-:data:`HALVES_STABLE` of the effect's size, and Hotelling's T^2 with the jackknife covariance
-rejects zero at :data:`HONEST_ALPHA`. The floors come from the longest rest.
+correlated (a tumble's are): a block jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS`
+stretches of the log gives each candidate's standard errors; the split halves agree within
+:data:`HALVES_Z` of them or within :data:`HALVES_STABLE` of the effect's size, and Hotelling's
+T^2 with the jackknife covariance rejects zero at :data:`HONEST_ALPHA`. The floors come from
+the longest rest.
 """
 
 from __future__ import annotations
