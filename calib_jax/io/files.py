@@ -36,6 +36,7 @@ from __future__ import annotations
 import bz2
 import codecs
 import csv
+import dataclasses
 import gzip
 import io
 import lzma
@@ -950,7 +951,8 @@ def as_log(data, sensor: str | None = None):
 def join_gyro(log: SensorLog, gyro_log: SensorLog) -> SensorLog:
     """The accelerometer's log with the gyro readings of another file of the same recording
     (imu_tk's two-file layout), after checking that they share one clock: the same number of
-    rows and, where both have one, the same time column. A ValueError names both files."""
+    rows and, where both have one, the same time column. A ValueError names both files. The
+    logs given are left as they are (a new SensorLog is returned)."""
     a, g = log.path or "the accelerometer's log", gyro_log.path or "the gyro's log"
     why = "the gyro fit needs both sensors sample by sample on one clock"
     if len(log) != len(gyro_log):
@@ -958,8 +960,7 @@ def join_gyro(log: SensorLog, gyro_log: SensorLog) -> SensorLog:
     if log.t is not None and gyro_log.t is not None and not np.allclose(log.t, gyro_log.t):
         worst = float(np.max(np.abs(log.t - gyro_log.t)))
         raise ValueError(f"the time columns of {a} and {g} differ by up to {worst:.3g} s: {why}")
-    log.gyro = gyro_log.vectors("gyro")
-    return log
+    return dataclasses.replace(log, gyro=gyro_log.vectors("gyro"))
 
 
 def _assemble(
