@@ -42,11 +42,11 @@ def _badge(status: str) -> str:
     )
 
 
-def table(header: list[str], rows: list[list]) -> str:
-    """An HTML table (cells escaped; floats to 6 significant digits)."""
+def table(header: list[str], rows: list[list], cell=_fmt, attrs: str = "") -> str:
+    """An HTML table (cells escaped by ``cell``; floats to 6 significant digits)."""
     head = "".join(f"<th>{escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{_fmt(c)}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+    body = "".join("<tr>" + "".join(f"<td>{cell(c)}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table{attrs}><tr>{head}</tr>{body}</table>"
 
 
 def _lists(warnings: list[str], notes: list[str]) -> str:
@@ -316,7 +316,7 @@ def write_table(rows: list[dict], path: str | Path) -> Path:
 
 
 def batch_repr(kind: str, sensor: str, statuses) -> str:
-    """'BatchResult(accel, 4 sensors: 3 ok, 1 no_coverage)'."""
+    """'BatchResult(accel, 4 sensors: 3 ok, 1 failed)'."""
     from collections import Counter
 
     counts = ", ".join(f"{n} {s}" for s, n in Counter(statuses).most_common())
@@ -343,14 +343,7 @@ def rows_html(rows: list[dict], limit: int = 20) -> str:
     if not rows:
         return "<div>no rows</div>"
     keys = list(rows[0])
-    head = "".join(f"<th>{escape(k)}</th>" for k in keys)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{_clipped(r.get(k))}</td>" for k in keys) + "</tr>"
-        for r in rows[:limit]
-    )
+    cells = [[r.get(k) for k in keys] for r in rows[:limit]]
+    grid = table(keys, cells, cell=_clipped, attrs=' style="white-space:nowrap"')
     more = f"<div>... {len(rows) - limit} more rows</div>" if len(rows) > limit else ""
-    grid = (
-        '<div style="overflow-x:auto"><table style="white-space:nowrap">'
-        f"<tr>{head}</tr>{body}</table></div>"
-    )
-    return f'{_STYLE}<div class="cj">{grid}{more}</div>'
+    return f'{_STYLE}<div class="cj"><div style="overflow-x:auto">{grid}</div>{more}</div>'
