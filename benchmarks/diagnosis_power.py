@@ -19,10 +19,12 @@ Noise: white 2 mg / 0.2 uT ("low") or 6 mg / 0.6 uT ("high"); the hand's acceler
 accelerometer, 0.02 g, white ("independent") or AR(1) with lag-1 correlation 0.99, about 1 s
 ("correlated"). Each row gives the detection rate (the effect accepted, and for a permutation
 the right map), the rate of any other effect accepted (false alarms), and the effect's size in
-units of the diagnosis's noise floor (median over seeds). Targets (issue 15): detection >= 95 %
+units of the diagnosis's noise floor (median over seeds; for timing a rough proxy, the median
+rate of change of the accelerometer times the offset). Targets (issue 15): detection >= 95 %
 at 3x the floor, false alarms <= 5 % per log, every map named at 5 deg of misalignment.
 
-Writes diagnosis_power.json, diagnosis_power.md and diagnosis_power.png.
+Writes diagnosis_power.json, diagnosis_power.md and diagnosis_power.png; the rows of parts not
+run this time are kept from the JSON already there (each part's command and time are listed).
 """
 
 from __future__ import annotations
@@ -137,8 +139,11 @@ def markdown(rows, meta) -> str:
     out = [
         "# MARG diagnosis: detection and false alarms on simulated tumbles",
         "",
-        f"`{meta['command']}`; {meta['seeds']} seeds per row; {meta['seconds']:.0f} s on "
-        f"{meta['machine']} (load {meta['load']}).",
+        *[
+            f"- `{m['command']}`: {m['seeds']} seeds per row; {m['seconds']:.0f} s on "
+            f"{m['machine']} (load {m['load']})."
+            for m in meta["runs"]
+        ],
         "",
         "| part | size | noise | samples | size / floor | detected | other effects |",
         "|---|---|---|---|---|---|---|",
@@ -203,15 +208,27 @@ def main() -> None:
     for row in grid(args.parts, args.seeds):
         rows.append(row)
         print(json.dumps(row), flush=True)
-    meta = {
+    run = {
         "command": "benchmarks/diagnosis_power.py --seeds "
         f"{args.seeds} --parts {' '.join(args.parts)}",
+        "parts": args.parts,
         "seeds": args.seeds,
         "seconds": time.perf_counter() - t0,
         "machine": f"{platform.machine()}, {jax.devices()[0].device_kind}",
         "load": load,
     }
-    (out / "diagnosis_power.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    old = out / "diagnosis_power.json"
+    runs = [run]
+    if old.exists():  # keep the parts not run this time
+        prev = json.loads(old.read_text())
+        kept = [r for r in prev["rows"] if r["part"] not in args.parts]
+        rows = kept + rows
+        earlier = prev.get("runs") or [prev["meta"]]
+        for m in earlier:
+            m.setdefault("parts", m["command"].split("--parts ")[1].split())
+        runs = [m for m in earlier if not set(m["parts"]) & set(args.parts)] + runs
+    meta = {"runs": runs}
+    (out / "diagnosis_power.json").write_text(json.dumps(meta | {"rows": rows}, indent=1))
     (out / "diagnosis_power.md").write_text(markdown(rows, meta))
     figure(rows, out / "diagnosis_power.png")
     print(markdown(rows, meta))
