@@ -35,8 +35,9 @@ def progress_bar(total: int | None, enabled: bool | None, desc: str, unit: str =
 
 
 def finish(bar) -> None:
-    """End a bar that stopped before its ``total`` (a diagnosis that converged in two of six
-    rounds): the total becomes what was done, so the bar reads complete, not stalled."""
+    """Close a bar; one that stopped before its ``total`` (a diagnosis that converged in two of
+    six rounds) gets what was done as its total, so it reads complete, not stalled."""
     if bar.total is not None and bar.n < bar.total:
         bar.total = bar.n
         bar.refresh()
+    bar.close()

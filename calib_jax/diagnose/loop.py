@@ -641,7 +641,6 @@ def _run(
         st["added_effect"] = c
         steps.append(st)
     finish(bar)
-    bar.close()
     return {
         "base": base,
         "base_free": base_free,

@@ -433,7 +433,6 @@ def diagnose_marg(
         steps.append(_step("+".join(["base", *effects]), cur, 0, effect=c))
         steps[-1]["coefficients"] = _coefficients(c, cur, P_cur, best["stderr_honest"])
     finish(bar)
-    bar.close()
     # floors: the angle over the longest rest, with the final model's rotation
     R_fin = np.asarray(rotvec_to_dcm(jnp.asarray(cur["theta"][:3] * free[:3]))) @ P_cur
     Mn = Mn @ R_fin.T
