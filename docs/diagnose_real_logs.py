@@ -5,6 +5,12 @@
 Writes docs/diagnosis/<log>/diagnosis.json for every log, the report figures for the logs
 named in --figures (default: a few, to keep the repository small), and docs/diagnosis/README.md
 with one table row per log. Logs missing from ../shared/data are skipped with a message.
+
+    .venv/bin/python docs/diagnose_real_logs.py --compare REV [--no-run]
+
+also writes docs/diagnosis/before_after.md: every candidate's decision in the JSON committed
+at git revision REV against the JSON written now (``--no-run``: the JSON already there), with
+the tests that failed, so a change to the acceptance tests shows what it changed on real data.
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
 import time
 from pathlib import Path
 
@@ -113,12 +120,99 @@ def fmt(d, v):
     return f"{math.degrees(v):.2f} deg"
 
 
+def _candidates(d: dict) -> dict:
+    """(round, effect) -> the entry, for the fitted candidates of a diagnosis JSON."""
+    return {
+        (r, e["effect"]): e
+        for r, log in enumerate(d.get("rounds") or [], 1)
+        for e in log
+        if "tests" in e
+    }
+
+
+def _decision(e: dict | None) -> str:
+    if e is None:
+        return "not tried"
+    if e["accepted"]:
+        return "**accepted**"
+    failed = [k for k, ok in e["tests"].items() if not ok]
+    return "failed " + ", ".join(failed)
+
+
+def _z(e: dict | None) -> str:
+    if e is None or e.get("halves_max_z") is None:
+        return "-"
+    formal = e.get("halves_max_z_formal")
+    honest = f" (formal {formal:.1f})" if formal is not None else ""
+    return f"{e['halves_max_z']:.1f}{honest}"
+
+
+def compare(rev: str) -> Path:
+    """Write before_after.md: the decisions in the JSON at ``rev`` against those now."""
+    rows = []
+    for folder in sorted(p for p in OUT.iterdir() if (p / "diagnosis.json").exists()):
+        new = json.loads((folder / "diagnosis.json").read_text())
+        rel = (folder / "diagnosis.json").relative_to(ROOT.parent)
+        try:
+            text = subprocess.run(
+                ["git", "show", f"{rev}:{rel}"], capture_output=True, check=True, text=True
+            ).stdout
+        except subprocess.CalledProcessError:
+            continue  # a log new since rev
+        old = json.loads(text)
+        verdict = f"{old['verdict']} -> {new['verdict']}"
+        if old["verdict"] == new["verdict"]:
+            verdict = f"{new['verdict']} (same)"
+        before, after = _candidates(old), _candidates(new)
+        keys = sorted(set(before) | set(after))
+        for k, (r, effect) in enumerate(keys):
+            b, a = before.get((r, effect)), after.get((r, effect))
+            p = a.get("p_honest") if a else None
+            rows.append(
+                f"| {folder.name if k == 0 else ''} | {verdict if k == 0 else ''} | {r} | "
+                f"{effect} | {_decision(b)} | {_z(b)} | {_decision(a)} | {_z(a)} | "
+                f"{'-' if p is None else f'{p:.2g}'} |"
+            )
+        if not keys:
+            rows.append(f"| {folder.name} | {verdict} | | (no candidate fitted) | | | | | |")
+    path = OUT / "before_after.md"
+    path.write_text(
+        "\n".join(
+            [
+                f"# Acceptance tests before and after: the JSON at {rev} against now",
+                "",
+                "Written by `.venv/bin/python docs/diagnose_real_logs.py --compare "
+                f"{rev} --no-run`. Halves z: the largest difference between the two halves' "
+                "coefficients in standard errors (before: formal, independent samples; after: "
+                "block jackknife, with the formal in brackets). p: Hotelling's T^2 with the "
+                "jackknife covariance (the `honest` test, p < 0.01). `-`: not computed (the "
+                "honest tests run only for candidates that pass BIC, null and plausibility).",
+                "",
+                "| log | verdict | round | candidate | before | halves z | after | halves z | p |",
+                "|---|---|---|---|---|---|---|---|---|",
+                *rows,
+                "",
+            ]
+        )
+    )
+    return path
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument(
         "--figures", nargs="*", default=["xsens", "ck_accel", "qmc_filtered", "ck_marg"]
     )
+    ap.add_argument("--compare", metavar="REV", help="also write before_after.md against REV")
+    ap.add_argument("--no-run", action="store_true", help="only compare (with --compare)")
     args = ap.parse_args()
+    if not args.no_run:
+        run_all(args.figures)
+    if args.compare:
+        print(f"wrote {compare(args.compare)}")
+
+
+def run_all(figures: list[str]) -> None:
     rows = []
     for name, desc, run in logs():
         t0 = time.perf_counter()
@@ -132,7 +226,7 @@ def main() -> None:
         out = OUT / name
         out.mkdir(parents=True, exist_ok=True)
         (out / "diagnosis.json").write_text(json.dumps(d.to_dict(), indent=1) + "\n")
-        if name in args.figures:
+        if name in figures:
             write_report(d, out)
         print(f"== {name} ({dt:.1f} s)\n{d.summary()}\n")
         # the way in (detector settings and candidates) is in each JSON; the table keeps findings

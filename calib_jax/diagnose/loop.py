@@ -6,11 +6,16 @@ that passes ALL of these tests (issue 6: an information criterion alone accepted
 terms on hand-held data that moved a bias by hundreds of g):
 
 1. criterion: BIC falls by more than :data:`BIC_MIN`;
-2. leave-one-out: the leave-one-observation-out RMS (the linearised "PRESS" residuals
-   e_i / (1 - h_ii) at the optimum, no refits) falls by more than :data:`LOO_GAIN`;
-3. split halves: the effect's coefficients fitted on two halves of the log (alternate eighths
-   in time, so both span the drivers' ranges) agree within :data:`HALVES_Z` combined standard
-   errors;
+2. held out: the errors of each of :data:`BLOCKS` contiguous stretches of the log, predicted
+   by the fit without that stretch, fall by more than
+   :data:`calib_jax.diagnose.honest.HELD_OUT_GAIN` (single-sample leave-one-out keeps a
+   sample's correlated neighbours in the fit; its gain is still reported);
+3. split halves and honest significance (:mod:`calib_jax.diagnose.honest`): the effect's
+   coefficients fitted on two halves of the log (alternate eighths in time, so both span the
+   drivers' ranges) agree within 3 of their standard errors inflated by the block jackknife's
+   correlation factor (or within a quarter of the effect's size), and Hotelling's T^2 with
+   the jackknife covariance rejects zero. Formal errors assume independent samples and a
+   tumble's are not (issue 15);
 4. null test: the BIC gain beats every one of :data:`NULL_SIMS` simulations of the current
    model (same points, times and temperatures) whose magnitude errors are block-bootstrapped
    from the current residuals (so they keep their size and their correlation in time), put
@@ -24,8 +29,10 @@ rejected (weight 0) and listed. The loop ends when nothing passes; the residual 
 regressed on every driver (time, temperature, orientation, motion) and significant structure
 above the floor that no effect explained is reported as ``unexplained_structure``.
 
-Everything fitted goes through one compiled, vmapped LM (:mod:`calib_jax.diagnose.model`):
-one call per round fits the candidates, their halves and the null simulations together.
+Everything fitted goes through one compiled LM (:mod:`calib_jax.diagnose.model`): one call
+per round fits the candidates, their halves and the null simulations; a second fits the
+leave-one-block-out refits of the candidates that passed the cheap tests (BIC, null,
+plausibility), started at their full fit.
 """
 
 from __future__ import annotations
@@ -37,6 +44,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import stats
 
+from ..align import block_jackknife_cov, time_blocks
 from ..calibration import Record
 from ..io.files import SensorLog, as_log
 from ..lm import is_converged
@@ -47,10 +55,13 @@ from ..progress import finish, progress_bar
 from ..static import detect_rest
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
+from .honest import HELD_OUT_GAIN, held_out_rms, judge
 
 BIC_MIN = 10.0  # "very strong" evidence on the Kass-Raftery scale
-LOO_GAIN = 0.01  # leave-one-out RMS must fall by more than 1 %
-HALVES_Z = 3.0  # |c_first - c_second| / sqrt(se1^2 + se2^2) for every coefficient
+BLOCKS = 16
+"""Contiguous stretches of the log for the block jackknife. The MARG diagnosis uses
+:data:`calib_jax.align.JACKKNIFE_BLOCKS` (8) for at most 3 coefficients; an effect here has up
+to 6 (degree 2), and Hotelling's F(p, K - p) needs K well above p."""
 NULL_SIMS = 8  # beat all 8: a chance pass has probability 1/9 per candidate
 OUTLIER_FAMILYWISE = 0.01
 MIN_OBSERVATIONS = 30  # below: each half has too few points for the split test
@@ -432,21 +443,23 @@ _MEANING = {
 }
 
 
-def _coefficients(effect, theta, se) -> dict:
-    """An accepted effect's coefficients, relative to g or to the field, with their meaning."""
+def _coefficients(effect, theta, se, se_formal) -> dict:
+    """An accepted effect's coefficients, relative to g or to the field, with their meaning,
+    their honest (block jackknife) standard errors and the formal ones (independent samples)."""
     out = {}
     for slot in _slots(effect, 2):
         if slot == "soft_iron":
             continue
         sl = M.SLOTS[slot]
         if np.any(theta[sl] != 0):
-            out[slot] = {"value": theta[sl], "stderr": se[sl], "meaning": _MEANING[slot]}
+            errors = {"stderr": se[sl], "stderr_formal": se_formal[sl]}
+            out[slot] = {"value": theta[sl], **errors, "meaning": _MEANING[slot]}
             if slot == "quadratic":
                 # the sensor reads y = a + q a^2 (to first order): |y| at +1 minus |y| at -1
                 # along an axis is 2 q
                 out["scale_asymmetry"] = {
                     "value": theta[sl],
-                    "stderr": se[sl],
+                    **errors,
                     "meaning": "(|reading at +1| - |reading at -1|) / 2 per axis",
                 }
     return out
@@ -485,6 +498,63 @@ def _step(label, fit, n_rejected, effect=None) -> dict:
     }
 
 
+def _cheap_tests(c, d, fits, nb, cur, degree) -> dict:
+    """A candidate's round entry with the tests that need no refit: convergence, BIC, the
+    null test (its gain beats each null simulation's) and plausibility."""
+    fit = fits[d["real"]]
+    dbic = cur["bic"] - fit["bic"]
+    null_gain = max(nb[k] - fits[i]["bic"] for k, i in enumerate(d["null"]))
+    ok_plaus, why = _plausible(c, fit["theta"], cur["theta"], d["free"])
+    entry = {
+        "effect": c,
+        "accepted": False,
+        "delta_bic": dbic,
+        "loo_gain": 1.0 - fit["loo_rms"] / cur["loo_rms"],
+        "null_max_delta_bic": null_gain,
+        "rms": fit["rms"],
+        "loo_rms": fit["loo_rms"],
+        "tests": {
+            "converged": fit["converged"],
+            "bic": dbic > BIC_MIN,
+            "null": dbic > null_gain,
+            "plausible": ok_plaus,
+        },
+    }
+    if not ok_plaus:
+        entry["implausible"] = why
+    return entry
+
+
+def _jackknife(P: _Problems, theta, w, free, block) -> list[dict]:
+    """The fit without each of the :data:`BLOCKS` blocks, started at ``theta`` (a fit on the
+    whole log, so a few iterations each)."""
+    for b in range(BLOCKS):
+        P.add(theta, w * (block != b), free)
+    return P.run()
+
+
+def _honest_tests(entry, d, fits, jack, held_cur, block, w, degree) -> None:
+    """Add the held-out, halves and honest-significance tests (:mod:`.honest`) to a
+    candidate's entry, from its halves (``fits``) and leave-one-block-out refits ``jack``."""
+    sl = _indices(_slots(entry["effect"], degree))
+    sl = sl[d["free"][sl]]
+    fit, h1, h2 = fits[d["real"]], fits[d["h1"]], fits[d["h2"]]
+    h = judge(
+        fit["theta"][sl],
+        h1["theta"][sl],
+        h2["theta"][sl],
+        np.stack([f["theta"][sl] for f in jack]),
+        np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2),
+        fit["stderr"][sl],
+    )
+    held = held_out_rms([f["e"] for f in jack], block, w)
+    entry["held_out_gain"] = 1.0 - held / held_cur
+    entry["tests"]["held_out"] = entry["held_out_gain"] > HELD_OUT_GAIN
+    entry["tests"]["halves"] = h.pop("halves")
+    entry["tests"]["honest"] = h.pop("honest")
+    entry.update(h, stderr_formal=fit["stderr"][sl])
+
+
 def _run(
     obs: Observations,
     candidates: tuple[str, ...],
@@ -512,6 +582,9 @@ def _run(
     order = np.argsort(obs.t, kind="stable")
     first = np.zeros(m, bool)
     first[order[(np.arange(m) * 8 // m) % 2 == 0]] = True
+    block = np.empty(m, int)
+    block[order] = time_blocks(m, BLOCKS)  # contiguous stretches in time
+    jack_cur = None  # the current model's leave-one-block-out fits, once computed
 
     bar = progress_bar(MAX_ROUNDS, progress, f"diagnosing {obs.sensor}", unit="round")
     for _ in range(MAX_ROUNDS):
@@ -557,6 +630,7 @@ def _run(
                 )
                 break
             w, cur = w_try, fit
+            jack_cur = None  # the weights changed
             newly.append(worst)
         if newly:
             rejected += newly
@@ -568,11 +642,6 @@ def _run(
                 effects.append("outliers")
 
         # --- parametric candidates: real, halves, null sims, one compiled fit for all
-        # correlated residuals (a filtered magnetometer) make the formal standard errors too
-        # small by sqrt((1 + rho) / (1 - rho)), rho the lag-1 autocorrelation in time
-        ea = cur["e"][order][(w[order] > 0)]
-        rho = float(np.corrcoef(ea[:-1], ea[1:])[0, 1]) if len(ea) > 3 else 0.0
-        inflate = math.sqrt((1 + max(rho, 0.0)) / max(1 - max(rho, 0.0), 1e-3))
         nulls = _null_points(obs, tau, T, cur["theta"], free, cur["e"], rng, NULL_SIMS)
         idx: dict[str, dict] = {}
         for c in remaining:
@@ -589,51 +658,37 @@ def _run(
         null_base = [P.add(cur["theta"], w, free, x=xn) for xn in nulls]
         fits = P.run()
         nb = [fits[i]["bic"] for i in null_base]
+        entries = {c: _cheap_tests(c, idx[c], fits, nb, cur, degree) for c in remaining}
+        # --- the honest tests, for the candidates that passed the cheap ones, best BIC gain
+        # first: the first to pass them is the round's best (the rest are not refitted)
+        judged = [c for c in remaining if all(entries[c]["tests"].values())]
+        judged.sort(key=lambda c: -entries[c]["delta_bic"])
         best = None
+        for c in judged:
+            d, fit = idx[c], fits[idx[c]["real"]]
+            if jack_cur is None:  # the current model without each block: its held-out errors
+                jack_cur = _jackknife(P, cur["theta"], w, free, block)
+            jack = _jackknife(P, fit["theta"], w, d["free"], block)
+            held_cur = held_out_rms([f["e"] for f in jack_cur], block, w)
+            _honest_tests(entries[c], d, fits, jack, held_cur, block, w, degree)
+            if all(entries[c]["tests"].values()):
+                best = (c, fit, d["free"], jack)
+                break
         for c in remaining:
-            d = idx[c]
-            fit = fits[d["real"]]
-            dbic = cur["bic"] - fit["bic"]
-            dloo = 1.0 - fit["loo_rms"] / cur["loo_rms"]
-            null_gain = max(nb[k] - fits[i]["bic"] for k, i in enumerate(d["null"]))
-            sl = _indices(_slots(c, degree))
-            sl = sl[d["free"][sl]]
-            h1, h2 = fits[d["h1"]], fits[d["h2"]]
-            zh = np.abs(h1["theta"][sl] - h2["theta"][sl]) / (
-                inflate * np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2)
-            )
-            zmax = float(np.max(zh)) if zh.size else 0.0
-            ok_plaus, why = _plausible(c, fit["theta"], cur["theta"], d["free"])
-            tests = {
-                "converged": fit["converged"],
-                "bic": dbic > BIC_MIN,
-                "loo": dloo > LOO_GAIN,
-                "halves": bool(np.isfinite(zmax) and zmax < HALVES_Z),
-                "null": dbic > null_gain,
-                "plausible": ok_plaus,
-            }
-            entry = {
-                "effect": c,
-                "accepted": all(tests.values()),
-                "delta_bic": dbic,
-                "loo_gain": dloo,
-                "halves_max_z": zmax,
-                "residual_autocorrelation": rho,
-                "null_max_delta_bic": null_gain,
-                "rms": fit["rms"],
-                "loo_rms": fit["loo_rms"],
-                "tests": tests,
-            }
-            if not ok_plaus:
-                entry["implausible"] = why
-            log.append(entry)
-            if entry["accepted"] and (best is None or dbic > best[1]):
-                best = (c, dbic, fit, d["free"])
+            e = entries[c]
+            if "held_out" not in e["tests"]:
+                e["not_run"] = (
+                    f"held_out, halves, honest: {best[0]} passed them first (larger BIC gain)"
+                    if best and all(e["tests"].values())
+                    else "held_out, halves, honest: the tests above failed"
+                )
+            e["accepted"] = all(e["tests"].values()) and "not_run" not in e
+        log += [entries[c] for c in remaining]
         rounds.append(log)
         bar.update(1)
         if best is None:
             break
-        c, _, fit, fc = best
+        c, fit, fc, jack_cur = best  # the accepted fit's jackknife is the new model's
         cur, free = fit, fc
         effects.append(c)
         remaining.remove(c)
@@ -641,7 +696,14 @@ def _run(
         st["added_effect"] = c
         steps.append(st)
     finish(bar)
+    # honest standard errors of the final model (block jackknife), for its coefficients
+    honest = np.full_like(cur["theta"], np.nan)
+    if any(e != "outliers" for e in effects):
+        if jack_cur is None:
+            jack_cur = _jackknife(P, cur["theta"], w, free, block)
+        honest = np.sqrt(np.diag(block_jackknife_cov(np.stack([f["theta"] for f in jack_cur]))))
     return {
+        "stderr_honest": honest,
         "base": base,
         "base_free": base_free,
         "final": cur,
@@ -795,7 +857,9 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     for st in res["steps"]:
         eff = st["added_effect"]
         if eff and eff not in ("outliers", "soft_iron"):
-            st["coefficients"] = _coefficients(eff, fin["theta"], fin["stderr"])
+            st["coefficients"] = _coefficients(
+                eff, fin["theta"], res["stderr_honest"], fin["stderr"]
+            )
     rejected = [
         {
             "index": i,

@@ -18,12 +18,10 @@ with R = I, P = I, dt = 0 in the base model (theta alone is fitted). Candidates:
 
 The acceptance tests are those of :mod:`calib_jax.diagnose.loop` (BIC, a null test with
 block-bootstrapped angle errors, plausibility: |R| <= 15 deg beyond the permutation, |dt| <=
-0.5 s), with held-out blocks in place of leave-one-out and honest errors where samples are
-correlated (a tumble's are): a block jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS`
-stretches of the log gives each candidate's standard errors; the split halves agree within
-:data:`HALVES_Z` of them or within :data:`HALVES_STABLE` of the effect's size, and Hotelling's
-T^2 with the jackknife covariance rejects zero at :data:`HONEST_ALPHA`. The floors come from
-the longest rest.
+0.5 s) and the honest tests of :mod:`calib_jax.diagnose.honest` (held-out blocks, split
+halves against honest errors, Hotelling's T^2) over
+:data:`calib_jax.align.JACKKNIFE_BLOCKS` stretches of the log: a tumble's samples are
+correlated. The floors come from the longest rest.
 """
 
 from __future__ import annotations
@@ -38,7 +36,6 @@ import numpy as np
 from ..align import (
     JACKKNIFE_BLOCKS,
     PERMUTATION_MARGIN,
-    block_jackknife_cov,
     permutation_search,
     time_blocks,
 )
@@ -49,10 +46,9 @@ from ..rotations import describe_permutation, rotvec_to_dcm
 from ..runtime import disk_jit
 from ..static import detect_rest
 from .floors import allan_deviation
+from .honest import HELD_OUT_GAIN, held_out_rms, judge
 from .loop import (
     BIC_MIN,
-    HALVES_Z,
-    LOO_GAIN,
     MIN_OBSERVATIONS,
     NULL_SIMS,
     Diagnosis,
@@ -68,13 +64,6 @@ from .model import fit_each
 N_P = 5  # rotvec (3), theta, dt
 SLOTS = {"sensor_misalignment": [0, 1, 2], "timing_offset": [4]}
 BOUNDS = {"rotation_deg": 15.0, "dt_s": 0.5}
-HALVES_STABLE = 0.25
-"""Halves that differ by less than this fraction of the effect's size agree, whatever the
-standard errors say: a large effect stable in sign and size is real for a user."""
-HONEST_ALPHA = 0.01
-"""The effect's coefficients must differ from zero at this level by Hotelling's T^2 with the
-jackknife covariance (F(p, K - p) with K blocks): a significance that holds for correlated
-samples, where BIC, leave-one-out and the null test's likelihoods assume independence."""
 
 
 def _interp(t, tm, m):
@@ -157,61 +146,34 @@ def _null_series(a_full, m_full, tm, R, dt, theta, eps_obs, t_obs, rng, L):
     return np.stack([np.interp(tm - dt, tm, back[:, k]) for k in range(3)], axis=1)
 
 
-def hotelling_p(theta: np.ndarray, cov: np.ndarray, k: int) -> float:
-    """p-value of theta = 0 with a covariance estimated from k blocks (T^2 -> F(p, k - p))."""
-    from scipy import stats
-
-    p = len(theta)
-    try:
-        t2 = float(theta @ np.linalg.solve(cov, theta))
-    except np.linalg.LinAlgError:
-        return float("nan")
-    return float(stats.f.sf((k - p) / (p * (k - 1)) * t2, p, k - p))
-
-
-def held_out_rms(jack: list[dict], block: np.ndarray, w: np.ndarray) -> float:
-    """RMS of each block's errors predicted by the fit without that block: what the model
-    predicts on data it has not seen, where a tumble's neighbouring samples (which single-sample
-    leave-one-out keeps in the fit) are correlated."""
-    e = np.concatenate([f["e"][(block == b) & (w > 0)] for b, f in enumerate(jack)])
-    return float(np.sqrt(np.mean(e**2)))
-
-
 def _judge(c, fits: list[dict], i: int, nb: list[float], cur: dict, held_cur, block, w, P_best):
     """One candidate's round entry: its fit (``fits[i]``), the two halves' fits after it,
     the :data:`JACKKNIFE_BLOCKS` leave-one-block-out fits after those and its null fits after
     those, against the current model ``cur`` and the null baselines' BIC ``nb``; accepted
-    when every test passes.
-
-    The halves agree when they differ by less than :data:`HALVES_Z` honest standard errors
-    (the jackknife's, doubled: each half has twice the full log's variance) or by less than
-    :data:`HALVES_STABLE` of the effect's size. Prediction is judged on held-out blocks (each
-    block's errors from the fit without it, :func:`held_out_rms`, against the current model's
-    ``held_cur``) instead of single-sample leave-one-out, which keeps a left-out sample's
-    correlated neighbours in the fit."""
+    when every test passes (the honest tests: :mod:`calib_jax.diagnose.honest`)."""
     fit, h1, h2 = fits[i], fits[i + 1], fits[i + 2]
     jack = fits[i + 3 : i + 3 + JACKKNIFE_BLOCKS]
     nulls = fits[i + 3 + JACKKNIFE_BLOCKS : i + 3 + JACKKNIFE_BLOCKS + NULL_SIMS]
     dbic = cur["bic"] - fit["bic"]
     null_gain = max(nb[k] - f["bic"] for k, f in enumerate(nulls))
     sl = SLOTS[c]
-    diff = h1["theta"][sl] - h2["theta"][sl]
-    cov = block_jackknife_cov(np.stack([f["theta"][sl] for f in jack]))
-    se_honest = np.sqrt(np.diag(cov))
-    p_honest = hotelling_p(fit["theta"][sl], cov, JACKKNIFE_BLOCKS)
-    held = held_out_rms(jack, block, w)
-    z_formal = np.abs(diff) / np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2)
-    zh = np.abs(diff) / (2.0 * se_honest)
-    size = float(np.linalg.norm(fit["theta"][sl]))
-    stable = bool(np.linalg.norm(diff) <= HALVES_STABLE * size)
+    h = judge(
+        fit["theta"][sl],
+        h1["theta"][sl],
+        h2["theta"][sl],
+        np.stack([f["theta"][sl] for f in jack]),
+        np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2),
+        fit["stderr"][sl],
+    )
+    held = held_out_rms([f["e"] for f in jack], block, w)
     rot = math.degrees(float(np.linalg.norm(fit["theta"][:3])))
     plaus = rot <= BOUNDS["rotation_deg"] and abs(fit["theta"][4]) <= BOUNDS["dt_s"]
     tests = {
         "converged": fit["converged"],
         "bic": dbic > BIC_MIN,
-        "held_out": 1 - held / held_cur > LOO_GAIN,
-        "halves": bool(np.all(np.isfinite(zh)) and (np.max(zh) < HALVES_Z or stable)),
-        "honest": bool(p_honest < HONEST_ALPHA),
+        "held_out": 1 - held / held_cur > HELD_OUT_GAIN,
+        "halves": h.pop("halves"),
+        "honest": h.pop("honest"),
         "null": dbic > null_gain,
         "plausible": bool(plaus),
     }
@@ -221,11 +183,7 @@ def _judge(c, fits: list[dict], i: int, nb: list[float], cur: dict, held_cur, bl
         "delta_bic": dbic,
         "loo_gain": 1 - fit["loo_rms"] / cur["loo_rms"],
         "held_out_gain": 1 - held / held_cur,
-        "halves_max_z": float(np.max(zh)),
-        "halves_max_z_formal": float(np.max(z_formal)),
-        "halves_difference_of_size": float(np.linalg.norm(diff)) / max(size, 1e-300),
-        "stderr_honest": se_honest,
-        "p_honest": p_honest,
+        **h,
         "stderr_formal": fit["stderr"][sl],
         "null_max_delta_bic": null_gain,
         "rms": fit["rms"],
@@ -413,7 +371,7 @@ def diagnose_marg(
         rows += [(th, Mf, P_cur, w * (block != b), free) for b in range(JACKKNIFE_BLOCKS)]
         fits = _run(rows, a, tob, tm)
         nb = [f["bic"] for f in fits[nb0:jb0]]
-        held_cur = held_out_rms(fits[jb0:], block, w)
+        held_cur = held_out_rms([f["e"] for f in fits[jb0:]], block, w)
         log = [_judge(c, fits, idx[c], nb, cur, held_cur, block, w, P_best) for c in remaining]
         if not rounds:
             log.insert(0, perm)  # the permutation search, accepted or not, in the JSON
