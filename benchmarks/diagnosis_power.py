@@ -1,9 +1,25 @@
-"""The MARG diagnosis's power and false alarms on simulated tumbles (issue 15).
+"""The diagnosis's power and false alarms on simulated logs (issue 15).
 
     .venv/bin/python benchmarks/diagnosis_power.py [--seeds 20] [--parts misalignment timing
-        permutation] [--out benchmarks/results]
+        permutation accel mag] [--out benchmarks/results]
 
-For each effect size, two noise levels and two sample correlations, ``--seeds`` simulated
+Accelerometer and magnetometer (parts ``accel`` and ``mag``): each catalogue effect alone at
+multiples of the noise floor of a clean log of the same kind (the median over the seeds;
+0.5, 1, 3, 10, 20x for the accelerometer, 1, 3, 10x for the magnetometer, a diagnosis of
+which takes ~5 s), and clean logs (the false-alarm rate), through
+:func:`calib_jax.diagnose.diagnose_accel` (60 poses of 1 s at 100 Hz after a 20 s rest, with a
+temperature column) or
+:func:`calib_jax.diagnose.diagnose_mag` (a 10 s rest and a 30 s tumble at 50 Hz;
+``soft_iron`` on a spherical board with a sphere declared, so the clean log has no soft iron;
+``hard_iron_drift`` with the full ellipsoid declared). An effect's size is what it changes in
+the calibrated norm: the standard deviation of that change over the observations (pose means,
+or samples), or for ``outliers`` the largest (a disturbed pose's), over the diagnosis's floor
+(:func:`effect_size`). Sample noise white or AR(1) with lag-1 correlation 0.99 (about 1 s, as
+long as a pose), 2 or 6 mg (accel), 0.5 or 1.5 % of the field (mag; ``--noise`` picks).
+
+MARG:
+
+for each effect size, two noise levels and two sample correlations, ``--seeds`` simulated
 tumbles (3,000 samples at 100 Hz, ellipsoids fitted as a user's log would be) go through
 :func:`calib_jax.diagnose.diagnose_marg` with its acceptance tests (BIC, leave-one-out, null
 simulations, split halves and Hotelling's T^2 with block-jackknife errors, plausibility):
@@ -43,9 +59,16 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from calib_jax.diagnose import diagnose_marg  # noqa: E402
+from calib_jax.diagnose import diagnose_accel, diagnose_mag, diagnose_marg  # noqa: E402
 from calib_jax.rotations import describe_permutation, rotvec_to_dcm  # noqa: E402
-from calib_jax.simulate import correlated_noise, simulate_marg, tumble_quaternions  # noqa: E402
+from calib_jax.simulate import (  # noqa: E402
+    alpha_beta,
+    correlated_noise,
+    simulate_accel_log,
+    simulate_mag_log,
+    simulate_marg,
+    tumble_quaternions,
+)
 
 N = 3000
 RATE = 100.0
@@ -59,6 +82,133 @@ MAPS = {
     "swap x,y, negate x": [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
     "negate x and y": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]],
 }
+
+
+ACCEL_EFFECTS = ("bias_drift", "temperature_bias", "temperature_scale", "scale_nonlinearity")
+ACCEL_EFFECTS += ("outliers",)
+MAG_EFFECTS = {"hard_iron_drift": "full", "soft_iron": "sphere"}  # effect: declared model
+MULTIPLES = {"accel": (0.5, 1.0, 3.0, 10.0, 20.0), "mag": (1.0, 3.0, 10.0)}
+SENSOR_NOISE = {"accel": {"low": 2e-3, "high": 6e-3}, "mag": {"low": 5e-3, "high": 1.5e-2}}
+MAG_SAMPLES, MAG_REST, MAG_RATE = 2000, 500, 50.0
+
+
+def simulate_sensor(sensor, effect, size, noise, corr, seed, model="full"):
+    """(log, raw, effect_on_norm) of one simulated accelerometer or magnetometer log with
+    ``effect`` (None: clean) of ``size``; the sample noise white or AR(1). ``effect_on_norm``:
+    what the effect changes in the calibrated norm, per observation (pose means for the
+    accelerometer, samples for the magnetometer), without noise."""
+    sigma = SENSOR_NOISE[sensor][noise]
+    rho = CORRELATION[corr]
+    s, clean = _noise_free(sensor, effect, size, seed, model)
+    _, without = _noise_free(sensor, effect, 0.0, seed, model)
+    alpha, b = alpha_beta(s.params)
+    if sensor == "mag" and model == "sphere":
+        alpha = np.eye(3)  # the spherical board of _noise_free
+
+    def norm(x):
+        return np.linalg.norm((x - b) @ np.linalg.inv(alpha).T, axis=1)
+
+    change = norm(clean) - norm(without)
+    if sensor == "accel":
+        change = np.array([change[a:z].mean() for a, z in s.intervals])
+    rng = np.random.default_rng(seed + 3000)
+    raw = clean + (0.0 if rho else sigma) * rng.normal(size=clean.shape)
+    if rho:
+        raw = raw + correlated_noise(len(raw), sigma, rho, rng=seed + 2000)
+    return s, raw, change
+
+
+def _noise_free(sensor, effect, size, seed, model):
+    eff = (effect,) if effect else ()
+    if sensor == "accel":
+        s = simulate_accel_log(eff, size=size, noise=0.0, seed=seed)
+        return s, s.raw
+    sphere = model == "sphere"
+    kw = dict(samples=MAG_SAMPLES, rest=MAG_REST, rate=MAG_RATE, seed=seed)
+    s = simulate_mag_log(() if sphere else eff, size=size, noise=0.0, **kw)
+    raw = s.raw
+    if sphere:  # the board's ellipsoid replaced by a sphere (+ the soft iron asked for)
+        alpha, b = alpha_beta(s.params)
+        v = (raw - b) @ np.linalg.inv(alpha).T
+        gains = 1.0 + (size * np.array([3.0, -2.0, 1.0]) if effect else 0.0)
+        raw = v * gains + b
+    return s, raw
+
+
+def effect_size(effect, change) -> float:
+    """The effect's size, relative to g or the field: the standard deviation over observations
+    of its change of the norm (the mean removed: a gain absorbs it); for ``outliers`` the
+    largest change (a disturbed pose's)."""
+    if effect == "outliers":
+        return float(np.max(np.abs(change)))
+    return float(np.std(change))
+
+
+def diagnose_sensor(sensor, effect, s, raw, seed, model="full"):
+    if sensor == "accel":
+        kw = dict(t=s.t, temp=s.temp, intervals=s.intervals)
+        return diagnose_accel(raw, seed=seed, progress=False, **kw)
+    kw = dict(t=s.t, temp=s.temp, sample_rate=s.sample_rate, model=model)
+    return diagnose_mag(raw, seed=seed, progress=False, **kw)
+
+
+def sensor_points(sensor, noise, corr, seeds, multiples=None):
+    """Rows for one sensor, noise and correlation: the clean logs (the false-alarm rate, and
+    the floor that sets the sizes) and every effect at every multiple of that floor, the
+    effect's size being :func:`effect_size` (scaled from a unit-size log of seed 0)."""
+    effects = ACCEL_EFFECTS if sensor == "accel" else tuple(MAG_EFFECTS)
+    multiples = multiples or MULTIPLES[sensor]
+    models = ("full",) if sensor == "accel" else tuple(sorted(set(MAG_EFFECTS.values())))
+    floors = {}
+    for model in models:
+        found, fl = 0, []
+        for seed in range(seeds):
+            s, raw, _ = simulate_sensor(sensor, None, 0.0, noise, corr, seed, model)
+            d = diagnose_sensor(sensor, None, s, raw, seed, model)
+            found += bool(d.effects)
+            fl.append(d.noise_floor)
+        floors[model] = float(np.nanmedian(fl))
+        yield {
+            "part": sensor,
+            "effect": f"clean ({model})" if sensor == "mag" else "clean",
+            "size": 0.0,
+            "noise": noise,
+            "correlation": corr,
+            "seeds": seeds,
+            "detection_rate": 0.0,
+            "other_effects_rate": found / seeds,
+            "size_over_floor": 0.0,
+            "floor": floors[model],
+        }
+    for effect in effects:
+        model = MAG_EFFECTS.get(effect, "full")
+        unit = 1e-3
+        per_unit = effect_size(
+            effect, simulate_sensor(sensor, effect, unit, noise, corr, 0, model)[2]
+        )
+        for k in multiples:
+            size = k * floors[model] / per_unit * unit
+            hits = others = 0
+            ratio = []
+            for seed in range(seeds):
+                s, raw, change = simulate_sensor(sensor, effect, size, noise, corr, seed, model)
+                d = diagnose_sensor(sensor, effect, s, raw, seed, model)
+                hits += effect in d.effects
+                others += bool(set(d.effects) - {effect})
+                if math.isfinite(d.noise_floor) and d.noise_floor > 0:
+                    ratio.append(effect_size(effect, change) / d.noise_floor)
+            yield {
+                "part": sensor,
+                "effect": effect,
+                "size": size,
+                "multiple": k,
+                "noise": noise,
+                "correlation": corr,
+                "seeds": seeds,
+                "detection_rate": hits / seeds,
+                "other_effects_rate": others / seeds,
+                "size_over_floor": float(np.median(ratio)) if ratio else None,
+            }
 
 
 def simulate(seed, noise, corr, rot_deg=0.0, shift=0, P=None):
@@ -116,15 +266,20 @@ def run_point(part, size, noise, corr, seeds, P=None):
     }
 
 
-def grid(parts, seeds):
+def grid(parts, seeds, noises=tuple(NOISE)):
     for part in parts:
+        if part in ("accel", "mag"):
+            for noise in noises:
+                for corr in CORRELATION:
+                    yield from sensor_points(part, noise, corr, seeds)
+            continue
         if part == "misalignment":
             sizes = [0.0, 0.5, 1.0, 2.0, 5.0, 10.0]
         elif part == "timing":
             sizes = [0, 1, 2, 5, 10]
         else:
             sizes = list(MAPS)
-        for noise in NOISE:
+        for noise in noises:
             for corr in CORRELATION:
                 for size in sizes:
                     if part == "permutation":
@@ -137,7 +292,7 @@ def grid(parts, seeds):
 
 def markdown(rows, meta) -> str:
     out = [
-        "# MARG diagnosis: detection and false alarms on simulated tumbles",
+        "# The diagnosis: detection and false alarms on simulated logs",
         "",
         *[
             f"- `{m['command']}`: {m['seeds']} seeds per row; {m['seconds']:.0f} s on "
@@ -152,6 +307,8 @@ def markdown(rows, meta) -> str:
         size = r.get("map") or (
             f"{r['size']:g} deg" if r["part"] == "misalignment" else f"{r['size']:g} samples"
         )
+        if r["part"] in ("accel", "mag"):
+            size = r["effect"] + (f", {r['multiple']:g}x floor" if r["size"] else "")
         sof = "-" if r["size_over_floor"] is None else f"{r['size_over_floor']:.2g}"
         det = "-" if r["part"] != "permutation" and r["size"] == 0 else f"{r['detection_rate']:.0%}"
         out.append(
@@ -164,32 +321,42 @@ def markdown(rows, meta) -> str:
 def figure(rows, path: Path) -> None:
     from matplotlib.figure import Figure
 
-    parts = [p for p in ("misalignment", "timing") if any(r["part"] == p for r in rows)]
-    fig = Figure(figsize=(5 * max(len(parts), 1), 3.8))
-    for k, part in enumerate(parts):
-        ax = fig.add_subplot(1, len(parts), k + 1)
+    panels = [(p, None) for p in ("misalignment", "timing") if any(r["part"] == p for r in rows)]
+    panels += [
+        (p, c) for p in ("accel", "mag") for c in CORRELATION if any(r["part"] == p for r in rows)
+    ]
+    cols = min(len(panels), 3) or 1
+    fig = Figure(figsize=(5 * cols, 3.8 * math.ceil(len(panels) / cols)))
+    for k, (part, corr_only) in enumerate(panels):
+        ax = fig.add_subplot(math.ceil(len(panels) / cols), cols, k + 1)
+        lines = []
         for noise in NOISE:
             for corr in CORRELATION:
-                pts = [
-                    r
-                    for r in rows
-                    if r["part"] == part and r["noise"] == noise and r["correlation"] == corr
-                    and r["size"] > 0 and r["size_over_floor"] is not None
-                ]  # fmt: skip
-                if pts:
-                    ax.plot(
-                        [r["size_over_floor"] for r in pts],
-                        [100 * r["detection_rate"] for r in pts],
-                        "o-",
-                        label=f"{noise} noise, {corr}",
-                    )
+                if corr_only and corr != corr_only:
+                    continue
+                effects = sorted({r.get("effect") for r in rows if r["part"] == part})
+                for effect in effects:
+                    pts = [
+                        r
+                        for r in rows
+                        if r["part"] == part and r["noise"] == noise and r["correlation"] == corr
+                        and r.get("effect") == effect and r["size"] > 0
+                        and r["size_over_floor"] is not None
+                    ]  # fmt: skip
+                    if not pts:
+                        continue
+                    name = f"{effect}, {noise}" if effect else f"{noise} noise, {corr}"
+                    style = "o-" if noise == "low" else "s--"
+                    x = [r["size_over_floor"] for r in pts]
+                    lines.append(ax.plot(x, [100 * r["detection_rate"] for r in pts], style,
+                                         label=name, ms=4))  # fmt: skip
         ax.axvline(3, color="0.5", lw=0.8)
         ax.axhline(95, color="0.5", lw=0.8, ls="--")
         ax.set_xscale("log")
         ax.set_xlabel("effect size / noise floor")
         ax.set_ylabel("detected (%)")
-        ax.set_title(part, fontsize=10)
-        ax.legend(fontsize=7)
+        ax.set_title(part + (f" ({corr_only} samples)" if corr_only else ""), fontsize=10)
+        ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
 
@@ -198,6 +365,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--parts", nargs="+", default=["misalignment", "timing", "permutation"])
+    ap.add_argument("--noise", nargs="+", default=list(NOISE), choices=list(NOISE))
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
     args = ap.parse_args()
     out = Path(args.out)
@@ -205,12 +373,12 @@ def main() -> None:
     t0 = time.perf_counter()
     load = Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").exists() else "?"
     rows = []
-    for row in grid(args.parts, args.seeds):
+    for row in grid(args.parts, args.seeds, tuple(args.noise)):
         rows.append(row)
         print(json.dumps(row), flush=True)
     run = {
         "command": "benchmarks/diagnosis_power.py --seeds "
-        f"{args.seeds} --parts {' '.join(args.parts)}",
+        f"{args.seeds} --parts {' '.join(args.parts)} --noise {' '.join(args.noise)}",
         "parts": args.parts,
         "seeds": args.seeds,
         "seconds": time.perf_counter() - t0,
