@@ -62,6 +62,7 @@ _LAZY = {
     "distort": (".models.accel", "distort"),
     "sphere_residual": (".models.accel", "sphere_residual"),
     "StaticReport": (".static", "StaticReport"),
+    "TooFewPoses": (".observations", "TooFewPoses"),
     "detect_static": (".static", "detect_static"),
 }
 
@@ -115,6 +116,7 @@ __all__ = [
     "SensorLog",
     "StaticReport",
     "Status",
+    "TooFewPoses",
     "calibrate_accel",
     "calibrate_gyro",
     "GyroCalibration",

@@ -44,7 +44,12 @@ from .implicit import solve_implicit
 from .io.files import SensorLog, as_log
 from .lm import LMResult, fit_status, lm_solve, status_message
 from .models.accel import ALPHA_ENTRIES, PARAM_NAMES, normalized_sphere_residual
-from .observations import AccelObservations, accel_observations, detection_found
+from .observations import (
+    AccelObservations,
+    TooFewPoses,
+    accel_observations,
+    detection_found,
+)
 from .padding import pad_rows
 from .runtime import disk_jit
 from .static import StaticReport, distinct_directions
@@ -187,17 +192,54 @@ def _compiled(solver: str, model: str, options: tuple) -> Callable:
 # host-side helpers
 
 
-_UNIT_RANGES = "g: 0.3-3, m/s^2: 3-30, counts: above 30"
+UNIT_BANDS = {"g": (0.7, 1.4), "m/s^2": (7.0, 14.0), "counts": (30.0, np.inf)}
+"""Static norms an accelerometer reads in each unit: |g| within a gain error of 30-40 % (one
+beyond that is no accelerometer in that unit: a magnetometer in gauss reads 0.25-0.65, a
+gyroscope at rest near 0). Raw counts have any scale above 30."""
+
+_UNIT_RANGES = "g: 0.7-1.4, m/s^2: 7-14, counts: above 30"
 
 
 def _units_from_norm(norm: float) -> str | None:
-    if 0.3 <= norm <= 3.0:
-        return "g"
-    if 3.0 < norm <= 30.0:
-        return "m/s^2"
-    if norm > 30.0:
-        return "counts"
-    return None
+    """The unit whose band (:data:`UNIT_BANDS`) holds this static norm, or None."""
+    return next((u for u, (lo, hi) in UNIT_BANDS.items() if lo <= norm <= hi), None)
+
+
+def detect_units(static_norm: float, fit_norm: float | None = None) -> str | None:
+    """The accelerometer's unit from the median norm of its static readings, else from the
+    radius of the sphere through them (a large bias moves the norm, not the radius): the one
+    rule of the single fit and the batch."""
+    return _units_from_norm(static_norm) or (
+        _units_from_norm(fit_norm) if fit_norm is not None else None
+    )
+
+
+def no_accelerometer_unit(
+    norm: float, fit_norm: float | None = None, units_option: bool = True
+) -> str:
+    """Why a static norm fits no accelerometer unit, and what to do: the one message of the
+    single fit, the batch, the recorder and (``units_option`` False: it has no --units) the
+    diagnosis."""
+    radius = f" (radius {fit_norm:.4g} about their fitted centre)" if fit_norm else ""
+    like = ""
+    if 0.15 <= norm < 0.7:
+        like = (
+            " A magnetometer in gauss reads 0.25-0.65: if this is one, run calib-jax mag "
+            "(or diagnose --sensor mag)."
+        )
+    elif norm < 0.15:
+        like = " A gyroscope at rest reads near zero: if this is one, run calib-jax gyro."
+    return (
+        f"the static readings have median norm {norm:.4g}{radius}, which is no accelerometer "
+        f"reading in any unit considered ({_UNIT_RANGES}): gains would absorb the difference "
+        f"and the calibration would look fine while being wrong.{like} If it is an "
+        + (
+            "accelerometer in another scale, say so: --units counts (units='counts': any "
+            "scale, output in g)"
+            if units_option
+            else "accelerometer in another scale, convert it to g or m/s^2 first"
+        )
+    )
 
 
 def _nominal(x_static: np.ndarray, units: str, g: float) -> tuple[np.ndarray, float]:
@@ -272,24 +314,25 @@ def check_poses(
     if len(obs.means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
         _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
     if n_distinct < n_free:
-        hint = (
-            " With six faces (the Ferraris protocol) fit the six-parameter model instead "
-            "(model='accel6', --model accel6)."
-            if model == "accel9" and n_distinct >= 6
-            else ""
-        )
-        raise ValueError(
+        raise TooFewPoses(
             f"only {n_distinct} distinct poses (gravity directions at least 10 degrees apart) "
             f"among the {len(pts)} fit points: static detection "
             f"{detection_found(obs.report, sample_rate)}; the {n_free}-parameter model needs at "
-            f"least {n_free} poses spread over the sphere (paper 1 uses 48). Record more "
-            "orientations and hold each still for at least half a second; if the log does "
-            "hold more orientations than were found (slow tilting with no still poses), fit "
-            "its quasi-static samples: calib-jax accel --use samples --window 10 "
-            "--threshold-factor 20 (use='samples' in Python)." + hint
+            f"least {n_free} poses spread over the sphere (paper 1 uses 48)",
+            n_distinct,
+            model,
         )
 
     return c_s, r_s
+
+
+def _holds_six_faces(pts: np.ndarray, centre: np.ndarray, within_deg: float = 30.0) -> bool:
+    """Whether some pose has each sensor axis up and some each axis down (within
+    ``within_deg``): the six faces that determine gains and biases without cross terms."""
+    d = pts - centre
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    cos = np.cos(np.deg2rad(within_deg))
+    return bool(np.all(d.max(axis=0) >= cos) and np.all(-d.min(axis=0) >= cos))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -303,7 +346,7 @@ def calibrate_accel(
     units: Units = "auto",
     output_units: str | None = None,
     solver: str = "lm1",
-    model: Literal["accel9", "accel6"] = "accel9",
+    model: Literal["accel9", "accel6", "auto"] = "accel9",
     use: Literal["means", "samples"] = "means",
     sample_rate: float | None = None,
     window: int | None = None,
@@ -326,16 +369,19 @@ def calibrate_accel(
         Reference magnitude in output units. Default: 1 for g and counts (output in g),
         9.80665 for m/s^2.
     units : {"auto", "counts", "g", "m/s^2"}
-        Input units; "auto" decides from the static norm (0.3-3: g, 3-30: m/s^2, above: counts).
-        A declared unit that contradicts the data is an error.
+        Input units; "auto" decides from the static norm (0.7-1.4: g, 7-14: m/s^2, above 30:
+        counts; any other norm is an error naming the sensor it looks like). A declared unit
+        that contradicts the data is an error.
     output_units : str, optional
         Label of the calibrated output; default the input unit, or "g" for counts. Give it with
         ``g`` when calibrating counts to m/s^2 (``g=9.81744, output_units="m/s^2"``).
     solver : {"lm1", "lm2", "lm3", "optimistix"}
         Gavin LM update type 1-3, or optimistix's LevenbergMarquardt.
-    model : {"accel9", "accel6"}
+    model : {"accel9", "accel6", "auto"}
         Paper 1's nine parameters, or six (gains and biases; non-orthogonality held at zero),
-        for six-face protocols that cannot determine the cross terms.
+        for six-face protocols that cannot determine the cross terms; "auto" (the CLI's
+        default) takes nine where the log holds nine distinct poses or more, else six where it
+        holds six (a note says so).
     use : {"means", "samples"}
         Fit the static-interval means (each pose weighs the same; default) or every static
         sample (paper 1's choice; long rests weigh more).
@@ -371,8 +417,8 @@ def calibrate_accel(
         raise ValueError(f"accelerometer data must be (samples, 3), got shape {x.shape}")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {tuple(MODELS)}, got {model!r}")
+    if model not in (*MODELS, "auto"):
+        raise ValueError(f"model must be one of {(*MODELS, 'auto')}, got {model!r}")
     units = _UNIT_ALIASES.get(str(units).lower(), units) if units != "auto" else "auto"
     if units not in ("auto", "counts", "g", "m/s^2"):
         raise ValueError(f"units must be auto, counts, g or m/s^2, got {units!r}")
@@ -392,7 +438,27 @@ def calibrate_accel(
     notes: list[str] = log_notes + obs.notes
     report, means, pts = obs.report, obs.means, obs.points
 
-    c_s, r_s = check_poses(obs, model, sample_rate)
+    if model == "auto":  # paper 1's nine parameters, or six where the poses allow no more
+        try:
+            c_s, r_s = check_poses(obs, model := "accel9", sample_rate)
+        except TooFewPoses as exc:
+            if exc.n_distinct < 6:
+                raise
+            c_s, r_s = check_poses(obs, model := "accel6", sample_rate)
+            if not _holds_six_faces(obs.points, c_s):
+                raise TooFewPoses(
+                    f"{exc.finding}; nor do the poses hold each axis pointing up and down, "
+                    "which the six-parameter model needs",
+                    exc.n_distinct,
+                    "auto",
+                ) from None
+            notes.append(
+                f"model accel6 (gains and biases; the cross terms held at zero): the log holds "
+                f"{exc.n_distinct} distinct poses with each axis up and down, too few for paper "
+                "1's nine parameters (--model accel9 insists)"
+            )
+    else:
+        c_s, r_s = check_poses(obs, model, sample_rate)
     static_norm = obs.static_norm
     n_free = int(sum(MODELS[model]))
 
@@ -477,14 +543,10 @@ def calibrate_accel(
 def _resolve_units(units: str, n_intervals: int, static_norm: float, fit_norm: float) -> str:
     """The input unit: the one the static norm fits ("auto"), or the declared one checked
     against it (counts have any scale); a ValueError saying which unit the data look like."""
-    detected = _units_from_norm(static_norm) or _units_from_norm(fit_norm)
+    detected = detect_units(static_norm, fit_norm)
     if units == "auto":
         if detected is None:
-            raise ValueError(
-                f"the {n_intervals} static means have median norm {static_norm:.4g} "
-                f"(radius {fit_norm:.4g} about their fitted centre), which fits none of the "
-                f"units considered ({_UNIT_RANGES}); pass units= (--units counts|g|m/s^2)"
-            )
+            raise ValueError(no_accelerometer_unit(static_norm, fit_norm))
         return detected
     if detected != units and units != "counts":
         raise ValueError(
@@ -568,9 +630,15 @@ def _coverage_warnings(
         )
     if len(pts) - n_free < 3:
         warn.append(
-            f"{len(pts)} fit points for {n_free} parameters: almost no redundancy, so the "
-            "standard errors and the residual say little; fit the samples (use='samples') or "
-            "record more poses"
+            f"{len(pts)} fit points for {n_free} parameters: "
+            + (
+                "the fit passes through every point, so its standard errors and 'after' error "
+                "estimate nothing"
+                if len(pts) <= n_free
+                else "almost no redundancy, so the standard errors and the residual say little"
+            )
+            + "; fit every static sample (--use samples, use='samples') for errors from their "
+            "scatter, or record more poses"
         )
     return warn
 

@@ -35,7 +35,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 
 from .accel import MODELS as ACCEL_MODELS
-from .accel import _units_from_norm, initial_guess_moments
+from .accel import (
+    _units_from_norm,
+    detect_units,
+    initial_guess_moments,
+    no_accelerometer_unit,
+)
 from .calibration import BatchRecord
 from .geometry import centre_and_scale, moments
 from .linalg import cholesky_small, eigh_small, inv3
@@ -100,12 +105,17 @@ def check_reference_magnitude(g, units: str | None, norm: float) -> None:
             )
 
 
-def reference_for_log(norm: float, g=None) -> float:
-    """The accelerometer reference magnitude for one log from its static norm: the given ``g``
-    (checked against the log's unit, :func:`check_reference_magnitude`), else the |g| of the
-    unit the norm suggests (1 for g and counts, 9.80665 for m/s^2)."""
+def reference_for_log(norm: float, g=None, fit_norm: float | None = None) -> float:
+    """The accelerometer reference magnitude for one log from its static norm (and the radius
+    of the sphere through its poses, ``fit_norm``): the given ``g`` (checked against the log's
+    unit, :func:`check_reference_magnitude`), else the |g| of the unit the norms suggest (1
+    for g and counts, 9.80665 for m/s^2; :func:`calib_jax.accel.detect_units`, as the single
+    fit decides), a ValueError when they suggest none."""
     if g is None:
-        return G_IN_UNITS.get(_units_from_norm(float(norm)) or "", 1.0)
+        unit = detect_units(float(norm), fit_norm)
+        if unit is None:
+            raise ValueError(no_accelerometer_unit(float(norm), fit_norm))
+        return G_IN_UNITS.get(unit, 1.0)
     check_reference_magnitude(g, None, norm)
     return float(g)
 
@@ -298,12 +308,13 @@ def _unit_sphere_moments(dtype) -> jax.Array:
 
 def _checks(S, n_params, min_points=MIN_SAMPLES):
     """Status before fitting, from the moments alone: too few points (fewer than
-    ``min_points``, or than twice the parameters), or one plane."""
+    ``min_points``, or than the parameters: as many is an exact fit, as in the single fits),
+    or one plane."""
     n = S[9, 9]
     scatter = S[6:9, 6:9] / jnp.maximum(n, 1.0)
     ev, _ = eigh_small(scatter)
     flat = ev[0] <= FLAT * jnp.maximum(ev[2], 1e-300)
-    too_few = n < max(min_points, n_params + 1)
+    too_few = n < max(min_points, n_params)
     return jnp.where(
         too_few, int(Status.INSUFFICIENT_DATA), jnp.where(flat, int(Status.NO_COVERAGE), -1)
     )
@@ -493,9 +504,10 @@ def calibrate_accel_batch(
     shard : bool
         Split the sensors over all local devices (jax.sharding).
     min_points : int
-        Fewer valid rows than this (or than the free parameters plus one) is
-        INSUFFICIENT_DATA. The default suits samples; interval means that passed
-        :func:`calib_jax.accel.check_poses` need only the parameters plus one.
+        Fewer valid rows than this (or than the free parameters) is INSUFFICIENT_DATA. The
+        default suits samples; interval means that passed :func:`calib_jax.accel.check_poses`
+        need only as many as the parameters (six faces for ``accel6``: an exact fit, as
+        ``calibrate_accel`` gives).
 
     Returns
     -------

@@ -245,6 +245,19 @@ class AccelCalibration(Record):
             lines.append(f"{name:<10} {self.params[i]:>14.6g} {self.stderr[i]:>12.3g}  {u}")
         return "\n".join(lines)
 
+    def _improvement(self) -> str:
+        """The headline after the errors: how much lower, unless that says nothing (a fit that
+        did not converge, or one with no more fit points than parameters)."""
+        if not is_usable(self.status):
+            return f"no calibration: the fit is {self.status.replace('_', ' ')}"
+        n_free = 6 if self.model == "accel6" else 9
+        if self.n_points <= n_free:
+            return (
+                f"an exact fit ({self.n_points} fit points for {n_free} parameters): nothing "
+                "is left over to judge it or its standard errors by"
+            )
+        return f"{self.rms_before / max(self.rms_after, 1e-300):.0f}x lower"
+
     def report(self) -> str:
         """Table, error before and after, status and warnings, as printed by the CLI."""
         out = [
@@ -255,7 +268,7 @@ class AccelCalibration(Record):
             f"{self.nfev} evaluations)",
             f"RMS of (|a| - g)/g over interval means: before {self.rms_before:.3e}, "
             f"after {self.rms_after:.3e} (noise floor {self.noise_floor:.3e}); "
-            f"{self.rms_before / max(self.rms_after, 1e-300):.0f}x lower",
+            + self._improvement(),
             f"condition number {self.condition:.3g}; status: {self.status}",
         ]
         if self.poorly_determined:

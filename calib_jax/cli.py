@@ -539,7 +539,13 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--units", default="auto", help="input units: auto, counts, g, m/s^2")
     a.add_argument("--out-units", default=None, help="label of the calibrated output (with --g)")
     a.add_argument("--solver", default="lm1", choices=_SOLVERS)
-    a.add_argument("--model", default="accel9", choices=["accel9", "accel6"])
+    a.add_argument(
+        "--model",
+        default="auto",
+        choices=["auto", "accel9", "accel6"],
+        help="paper 1's nine parameters, or six (no cross terms) for six-face logs; default "
+        "auto: nine where the log holds nine distinct poses, else six",
+    )
     a.add_argument("--use", default="means", choices=["means", "samples"])
     a.add_argument("--broyden", action="store_true", help="finite differences + Broyden (paper 1)")
     a.add_argument("--columns", default=None, help="e.g. t,ax,ay,az or ax=AccX,ay=AccY,az=AccZ")
@@ -801,7 +807,13 @@ def build_parser() -> argparse.ArgumentParser:
     ex.set_defaults(func=run_export, output_files=(("out", "--out"),))
 
     _add_diagnose_parser(sub)
+    for command in sub.choices.values():  # what each command can be told to change
+        command.set_defaults(option_strings=frozenset(_option_strings(command)))
     return p
+
+
+def _option_strings(parser: argparse.ArgumentParser):
+    return (s for action in parser._actions for s in action.option_strings)
 
 
 def _add_diagnose_parser(sub) -> None:
@@ -859,8 +871,12 @@ def _is_input_error(exc: BaseException) -> bool:
 
 
 def _error_text(exc: BaseException, args: argparse.Namespace) -> str:
+    from .observations import TooFewPoses  # numpy only: no JAX import on an error path
+
     if isinstance(exc, OSError) and exc.strerror:
         msg = f"{exc.strerror}: {exc.filename}" if exc.filename else exc.strerror
+    elif isinstance(exc, TooFewPoses):  # advice in this command's own flags
+        msg = f"{exc.finding}. {exc.advice(getattr(args, 'option_strings', ()))}"
     else:
         msg = str(exc) or type(exc).__name__
     where = getattr(args, "file", None) or getattr(args, "dir", None)

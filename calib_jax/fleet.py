@@ -53,12 +53,13 @@ def prepare_log(
     from .accel import check_poses
 
     obs = accel_observations(x, use=use, sample_rate=log.sample_rate, **detector)
-    check_poses(obs, model or "accel9", log.sample_rate)
+    radius = check_poses(obs, model or "accel9", log.sample_rate)[1]
     info.update(
         notes=list(log.notes) + obs.warnings + obs.notes,
         static_intervals=obs.report.n_intervals,
         use=use,
         static_norm=obs.static_norm,
+        fit_norm=float(radius),
     )
     return obs.points, info
 
@@ -75,8 +76,8 @@ def fit_prepared(
     """
     import jax
 
+    from .accel import detect_units
     from .batch import (
-        _units_from_norm,
         calibrate_accel_batch,
         calibrate_mag_batch,
         reference_for_log,
@@ -88,11 +89,12 @@ def fit_prepared(
     for name, pts, info in prepared:
         if sensor == "accel":
             try:
-                g = reference_for_log(info["static_norm"], g_given)
+                g = reference_for_log(info["static_norm"], g_given, info.get("fit_norm"))
             except ValueError as exc:
                 out.append({"path": str(name), "status": "load_error", "message": str(exc)})
                 continue
-            info = {**info, "units": _units_from_norm(info["static_norm"]), "g": g}
+            units = detect_units(info["static_norm"], info.get("fit_norm"))
+            info = {**info, "units": units or "counts", "g": g}
             gs.append(g)
         fit.append((name, pts, info))
     if not fit:
@@ -103,8 +105,8 @@ def fit_prepared(
     with jax.enable_x64(True):
         if sensor == "accel":
             # interval means: the pose checks ran on the host; the batch's own floor is the
-            # model's parameter count plus one
-            r = calibrate_accel_batch(raw, mask, g=np.asarray(gs), min_points=10, **options)
+            # model's parameter count (six faces for accel6, as calibrate_accel fits them)
+            r = calibrate_accel_batch(raw, mask, g=np.asarray(gs), min_points=1, **options)
         else:
             r = calibrate_mag_batch(raw, mask, **options)
         entries = r.entries([str(name) for name, _, _ in fit])

@@ -947,7 +947,8 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     dt, rate = _time_steps(t, sample_rate, len(g))
     _check_turn_axes(g)
     if accel is None:
-        accel = calibrate_accel(acc, sample_rate=rate, **(accel_options or {}))
+        # six-face logs: gravity's direction needs no cross terms
+        accel = calibrate_accel(acc, sample_rate=rate, **{"model": "auto", **(accel_options or {})})
         notes.append(
             f"accelerometer calibrated first: {accel.n_intervals} static poses, status "
             f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"

@@ -200,3 +200,35 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
             "of its radius: the log looks like one pose held throughout, or motion throughout)"
         )
     return found
+
+
+class TooFewPoses(ValueError):
+    """The poses cannot determine the model: fewer distinct ones than it has parameters.
+    ``str()`` gives the finding and advice in Python keywords and the flags ``calib-jax
+    accel`` and ``batch`` share; :meth:`advice` words it for a command with other options."""
+
+    def __init__(self, finding: str, n_distinct: int, model: str):
+        self.finding, self.n_distinct, self.model = finding, n_distinct, model
+        super().__init__(f"{finding}. {self.advice({'--use', '--model'})}")
+
+    def advice(self, options) -> str:
+        """What to do, naming only the flags in ``options`` (a command's option strings)."""
+        samples, six = "", ""
+        if "--use" in options:
+            samples = (
+                "; if the log does hold more orientations than were found (slow tilting with "
+                "no still poses), fit its quasi-static samples: --use samples --window 10 "
+                "--threshold-factor 20 (use='samples', window=10, threshold_factor=20 in Python)"
+            )
+        if self.model == "accel9" and self.n_distinct >= 6:
+            six = " With six faces (the Ferraris protocol) fit the six-parameter model: " + (
+                "--model accel6 (model='accel6')."
+                if "--model" in options
+                else "calib-jax accel and batch do so with --model accel6."
+            )
+        return (
+            "Record more orientations and hold each still for at least half a second"
+            + samples
+            + "."
+            + six
+        )

@@ -269,3 +269,58 @@ def test_declared_counts_are_never_refused_for_their_scale(sim48):
         cj.calibrate_accel(raw, units="g")
     cal = cj.calibrate_accel(raw, units="counts")
     assert cal.success and cal.input_units == "counts"
+
+
+FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]])
+
+
+def test_six_faces_get_the_six_parameter_model_by_default_and_say_so():
+    """model='auto' (the CLI's default): a six-face log (the Ferraris protocol, imucal's
+    sessions) is fitted with gains and biases instead of being refused for paper 1's nine;
+    the result is the model='accel6' fit itself. Poses that are few and do not hold each axis
+    up and down are still refused, saying why."""
+    log = sim(5, FACES)
+    auto = cj.calibrate_accel(log.raw, model="auto", use="samples", **DET)
+    six = cj.calibrate_accel(log.raw, model="accel6", use="samples", **DET)
+    assert auto.model == "accel6" and any("model accel6" in n for n in auto.notes)
+    np.testing.assert_array_equal(auto.params, six.params)
+    # eight poses in the upper half only: too few for nine, and no face points x down
+    tilted = random_directions(40, 3)
+    tilted = tilted[tilted[:, 2] > 0.5][:8]
+    with pytest.raises(cj.TooFewPoses, match="up and down") as e:
+        cj.calibrate_accel(sim(6, tilted).raw, model="auto", **DET)
+    assert "--model accel6" not in str(e.value)
+
+
+def test_exact_fit_and_unconverged_fit_claim_no_improvement():
+    """Six interval means for six parameters pass through every point: the report used to
+    print '8706099938787x lower' (imucal's annotated session); a fit that did not converge
+    printed '81x lower' beside wild gains."""
+    cal = cj.calibrate_accel(sim(5, FACES).raw, model="accel6", **DET)
+    assert cal.n_points == 6
+    text = cal.report()
+    assert "an exact fit (6 fit points for 6 parameters)" in text and "x lower" not in text
+    assert any("passes through every point" in w for w in cal.warnings)
+    import dataclasses
+
+    stuck = dataclasses.replace(cal, status="not_converged")
+    assert "no calibration: the fit is not converged" in stuck.report()
+    assert "x lower" not in stuck.report()
+
+
+def test_another_sensors_log_is_refused_by_every_accelerometer_path(tmp_path):
+    """A magnetometer log in gauss (|m| ~ 0.55) read as an accelerometer: the norm fitted 'g'
+    (0.3-3), and calib-jax accel / batch returned gains of 0.55 with status ok. Now both
+    refuse it with the same message naming the magnetometer."""
+    from calib_jax.fleet import calibrate_files
+
+    log = sim(4, paper48_directions(), scale=0.55)
+    with pytest.raises(ValueError, match=r"0\.5\d.*magnetometer in gauss.*calib-jax mag"):
+        cj.calibrate_accel(log.raw, **DET)
+    path = tmp_path / "mag.csv"
+    t = np.arange(len(log.raw)) / 100.0
+    np.savetxt(path, np.column_stack([t, log.raw]), delimiter=",", header="t,ax,ay,az")
+    (entry,) = calibrate_files([path], progress=False, detector={"window": 25})
+    assert entry["status"] == "load_error" and "magnetometer in gauss" in entry["message"]
+    # declared counts (any scale) is the way to fit it anyway
+    assert cj.calibrate_accel(log.raw, units="counts", **DET).status == "ok"

@@ -81,9 +81,36 @@ def test_bad_input_exits_2_with_the_fix(tmp_path, capsys):
     assert main(["accel", str(bad)]) == 2
     assert "--columns" in capsys.readouterr().err
     ferraris = shared_file("imucal_ferraris/example_ferraris_session.csv")
-    assert main(["accel", str(ferraris), "--sample-rate", "102.4"]) == 2
-    assert "accel6" in capsys.readouterr().err
+    assert main(["accel", str(ferraris), "--sample-rate", "102.4", "--model", "accel9"]) == 2
+    assert "--model accel6" in capsys.readouterr().err
+    six = tmp_path / "six.json"
     assert main(["accel", str(ferraris), "--sample-rate", "102.4", "--model", "accel6"]) == 0
+    # without flags a six-face log gets the six-parameter model, and says so
+    assert main(["accel", str(ferraris), "--sample-rate", "102.4", "--json", str(six)]) == 0
+    assert "model accel6" in capsys.readouterr().out
+    assert json.loads(six.read_text())["model"] == "accel6"
+
+
+def test_too_few_poses_advice_names_only_the_commands_own_flags(capsys):
+    """gyro and diagnose have neither --use nor --model: their refusal of a log with too few
+    poses used to offer both (a new user's run on imucal's Ferraris session)."""
+    ferraris = shared_file("imucal_ferraris/example_ferraris_session.csv")
+    assert main(["diagnose", str(ferraris)]) == 2
+    err = capsys.readouterr().err
+    assert "only 6 distinct poses" in err and "calib-jax accel fits such a log" in err
+    assert "--model" not in err and "--use" not in err
+    from calib_jax.cli import _error_text, build_parser
+    from calib_jax.observations import TooFewPoses
+
+    exc = TooFewPoses("only 7 distinct poses", 7, "accel9")
+    for argv, flags, absent in [
+        (["accel", "f.csv"], ["--use samples", "--model accel6"], []),
+        (["batch", "logs"], ["--use samples", "--model accel6"], []),
+        (["gyro", "f.csv"], ["calib-jax accel and batch do so"], ["--use", "(model="]),
+    ]:
+        text = _error_text(exc, build_parser().parse_args(argv))
+        assert text.startswith("f.csv: only 7 distinct poses") or argv[0] == "batch", text
+        assert all(f in text for f in flags) and not any(f in text for f in absent), text
 
 
 def test_an_error_prints_what_the_loader_noticed_first(tmp_path, capsys):

@@ -52,7 +52,7 @@ from ..calibration import Record
 from ..io.files import SensorLog, as_log
 from ..lm import is_converged
 from ..models.layout import ALPHA_ENTRIES
-from ..observations import accel_observations, screen_samples
+from ..observations import TooFewPoses, accel_observations, screen_samples
 from ..padding import pad_rows
 from ..progress import finish, progress_bar
 from ..static import detect_rest
@@ -1016,15 +1016,26 @@ def diagnose_accel(
     else:
         # calibrate_accel's way in: the same screen, detector (a sweep scored by the fit, or
         # fixed blocks) and pose checks, so a log it refuses is not diagnosed either
-        from ..accel import check_poses
+        from ..accel import check_poses, detect_units, no_accelerometer_unit
 
         try:
             found = accel_observations(
                 x, sample_rate=sample_rate, block=block or None, **static_options
             )
-            check_poses(found, "accel9", sample_rate)
+            radius = check_poses(found, "accel9", sample_rate)[1]
+            if detect_units(found.static_norm, radius) is None:  # another sensor's log
+                raise ValueError(
+                    no_accelerometer_unit(found.static_norm, radius, units_option=False)
+                )
         except ValueError as exc:
-            d = _not_possible("accel", 0, "9 distinct static poses", str(exc), source)
+            why = str(exc)
+            if isinstance(exc, TooFewPoses):  # none of calib-jax accel's remedies apply here
+                why = exc.finding + (
+                    " (calib-jax accel fits such a log with six parameters)"
+                    if exc.n_distinct >= 6
+                    else ""
+                )
+            d = _not_possible("accel", 0, "9 distinct static poses", why, source)
             d.notes.extend(det_notes)
             return d
         spans = [(iv.start, iv.stop) for iv in found.report.intervals]
