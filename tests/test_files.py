@@ -375,6 +375,46 @@ def test_hdf5_in_broads_layout_loads_and_any_other_is_named(tmp_path):
         load_log(tmp_path / "other.h5")
 
 
+def _mat73(path, **variables):
+    """A MATLAB v7.3 file as MATLAB writes one: HDF5 behind a 512-byte MAT header, each
+    matrix stored transposed with its MATLAB_class (sunsided/sensor-fusion's logs)."""
+    h5py = pytest.importorskip("h5py")
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for name, value in variables.items():
+            f[name] = np.asarray(value, float).T
+            f[name].attrs["MATLAB_class"] = np.bytes_(b"double")
+        f.create_group("#refs#")
+    text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: test HDF5 schema 1.00 ."
+    header = text.ljust(116, b" ") + bytes(8) + b"\x00\x02IM"
+    with open(path, "r+b") as fh:
+        fh.write(header.ljust(512, b"\x00"))
+
+
+def test_mat_v73_reads_through_h5py(tmp_path):
+    """v7.3 files were refused ('scipy cannot read'); with h5py they read like v7 ones."""
+    _mat73(tmp_path / "v73.mat", accelBuffer=ROWS[:, :4])
+    scipy.io.savemat(tmp_path / "v7.mat", {"accelBuffer": ROWS[:, :4]})
+    new, old = load_log(tmp_path / "v73.mat"), load_log(tmp_path / "v7.mat")
+    np.testing.assert_array_equal(new.acc, old.acc)
+    np.testing.assert_array_equal(new.t, old.t)
+    assert "MATLAB v7.3 file, read with h5py" in new.notes
+
+
+def test_uneven_timestamps_give_the_mean_rate_with_a_note(tmp_path):
+    """A logger writing in bursts: three samples 2 ms apart then a 26 ms wait (mean 10 ms,
+    100 Hz). The median step said 500 Hz, and every window of the detector was five times
+    too long in samples (sunsided's MPU6050 log: median step 2.1 ms, mean 9.5 ms)."""
+    n = 600
+    steps = np.tile([0.002, 0.002, 0.026], n // 3)[: n - 1]
+    t = np.r_[0.0, np.cumsum(steps)]
+    log = load_log(_write(tmp_path, _table(np.column_stack([t, np.ones((n, 3))])), "bursts.csv"))
+    assert log.sample_rate == pytest.approx(100.0, rel=0.02)
+    assert any("timestamps uneven" in note for note in log.notes)
+    steady = np.r_[0.0, np.cumsum(np.full(n - 1, 0.01))]
+    plain = load_log(_write(tmp_path, _table(np.column_stack([steady, np.ones((n, 3))])), "e.csv"))
+    assert plain.sample_rate == pytest.approx(100.0) and not any("uneven" in m for m in plain.notes)
+
+
 def test_truncated_or_corrupt_mat(tmp_path):
     good = tmp_path / "good.mat"
     scipy.io.savemat(good, {"data": ROWS[:, :4]})

@@ -17,9 +17,10 @@ Supported:
 * UTF-8 (with or without a byte-order mark), UTF-16/32 with a byte-order mark, Latin-1; gzip,
   bzip2 or xz compression (found by the file's first bytes, not its name); decimal commas
   (``1,234;0,998``) when the separator is not a comma. Each of these adds a note.
-* MATLAB .mat (real binary MAT files through scipy.io; imu_tk's ``.mat`` files are text and
-  are read as text): variables named like columns (``ax``, ``acc_x``, ...), N x 3 matrices
-  named for a sensor (``acc``, ``gyro``, ``mag``) or one N x k matrix read like headerless text.
+* MATLAB .mat (real binary MAT files through scipy.io, v7.3 ones through h5py; imu_tk's
+  ``.mat`` files are text and are read as text): variables named like columns (``ax``,
+  ``acc_x``, ...), N x 3 matrices named for a sensor (``acc``, ``gyro``, ``mag``) or one N x k
+  matrix read like headerless text.
 * HDF5 in the BROAD benchmark's layout (``imu_acc``, ``imu_gyr``, ``imu_mag``, the rate in the
   ``sampling_rate`` attribute), through h5py (``pip install 'calib_jax[hdf5]'``); its optical
   truth is read by :func:`calib_jax.io.broad.load_broad`. Other HDF5 layouts: an error naming
@@ -734,16 +735,39 @@ def _is_mat(raw: bytes, path: Path) -> bool:
     )
 
 
+def _read_mat73(path: Path) -> dict[str, np.ndarray]:
+    """The numeric variables of a MATLAB v7.3 file (HDF5 underneath; MATLAB writes each
+    matrix transposed, so they are turned back), through h5py."""
+    try:
+        import h5py
+    except ImportError:
+        raise ValueError(
+            f"{path} is a MATLAB v7.3 (HDF5) file: reading it needs h5py (pip install h5py, "
+            "or pip install 'calib_jax[hdf5]'); or in MATLAB save it with save(..., '-v7'), or "
+            "export a CSV"
+        ) from None
+    numeric = {b"double", b"single", b"int8", b"int16", b"int32", b"int64", b"uint8"}
+    numeric |= {b"uint16", b"uint32", b"uint64", b"logical"}
+    try:
+        with h5py.File(path, "r") as f:
+            return {
+                k: np.asarray(v[()], float).T
+                for k, v in f.items()
+                if isinstance(v, h5py.Dataset) and v.attrs.get("MATLAB_class") in numeric
+            }
+    except OSError as exc:
+        why = f"{path} looks like a MATLAB v7.3 file but h5py cannot read it: {exc}"
+        raise ValueError(why) from None
+
+
 def _read_mat(raw: bytes, path: Path, notes: list[str]) -> _Table:
     import scipy.io
 
     try:
         mat = scipy.io.loadmat(io.BytesIO(raw))
-    except NotImplementedError:
-        raise ValueError(
-            f"{path} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; in MATLAB save it "
-            "with save(..., '-v7') or export a CSV"
-        ) from None
+    except NotImplementedError:  # v7.3: HDF5 underneath
+        mat = _read_mat73(path)
+        notes.append("MATLAB v7.3 file, read with h5py")
     except Exception as e:  # scipy raises many kinds for a damaged file
         raise ValueError(
             f"{path} is not a readable MATLAB file ({type(e).__name__}: {e}); it may be "
@@ -1122,8 +1146,7 @@ def _assemble(
             dt = np.diff(t[np.isfinite(t)])
             dt = dt[np.isfinite(dt) & (dt > 0)]
             if dt.size:
-                r = float(1.0 / np.median(dt))
-                rate = r if np.isfinite(r) and r > 0 else None
+                rate = _rate_from_steps(dt, notes)
     return SensorLog(
         acc=acc,
         gyro=gyro,
@@ -1138,6 +1161,24 @@ def _assemble(
         if tab.layout is None
         else {**tab.layout, "source": source, "time_scale": time_scale},
     )
+
+
+def _rate_from_steps(dt: np.ndarray, notes: list[str]) -> float | None:
+    """Samples per second from the time steps: the median step's rate, unless the steps are
+    so uneven that it misleads (a logger writing in bursts: sunsided's MPU6050 log has a
+    median step of 2.1 ms and a mean of 10 ms, about 100 Hz): then the mean step's, leaving
+    out the 1 % longest (pauses), with a note."""
+    r = float(1.0 / np.median(dt))
+    steady = dt[dt <= np.percentile(dt, 99)]
+    r_mean = float(1.0 / np.mean(steady)) if steady.size else r
+    if np.isfinite(r_mean) and r_mean > 0 and abs(r_mean / r - 1.0) > 0.25:
+        notes.append(
+            f"timestamps uneven (median step {1e3 / r:.3g} ms, mean {1e3 / r_mean:.3g} ms): "
+            f"sample rate taken as {r_mean:.4g} Hz from the mean step; give --sample-rate if "
+            "that is wrong"
+        )
+        r = r_mean
+    return r if np.isfinite(r) and r > 0 else None
 
 
 _TIME_UNITS = ((1.0, "s"), (1e-3, "ms"), (1e-6, "us"), (1e-9, "ns"))
