@@ -234,8 +234,8 @@ def no_accelerometer_unit(
         f"reading in any unit considered ({_UNIT_RANGES}): gains would absorb the difference "
         f"and the calibration would look fine while being wrong.{like} If it is an "
         + (
-            "accelerometer in another scale, say so: --units counts (units='counts': any "
-            "scale, output in g)"
+            "accelerometer in another scale, say so: calib-jax accel --units counts "
+            "(units='counts' in Python; any scale, output in g)"
             if units_option
             else "accelerometer in another scale, convert it to g or m/s^2 first"
         )

@@ -564,7 +564,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--model",
         default="auto",
         choices=["sphere", "diag", "full", "auto"],
-        help="hard iron only, axis-aligned ellipsoid, full ellipsoid, or the lowest BIC",
+        help="hard iron only, axis-aligned ellipsoid, full ellipsoid, or (auto) the lowest "
+        "BIC among the models the data determine",
     )
     m.add_argument(
         "--field", type=_pos_float, default=None, help="known field magnitude (output scale)"
@@ -611,7 +612,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--mag-model",
         default="auto",
         choices=["sphere", "diag", "full", "auto"],
-        help="magnetometer ellipsoid model (default: the lowest BIC)",
+        help="magnetometer ellipsoid model (default: the lowest BIC among the models the data "
+        "determine)",
     )
     g.add_argument("--field", type=_pos_float, default=None, help="known field magnitude")
     g.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference (static)")

@@ -12,7 +12,8 @@ Host side (checks, normalisation, model choice) around a pure jitted core:
    :func:`calib_jax.geometry.ellipsoid_fit_constrained`) and refine the quadric residual
    (:func:`calib_jax.models.mag.quadric_residual`) with the LM solver and exact Jacobians;
 5. model: sphere (hard iron only), diag (axis-aligned ellipsoid), full, or ``auto``: the one
-   with the lowest BIC of the radial error;
+   with the lowest BIC of the radial error among those the data determine (every standard
+   error under 1 %), else among those that converged;
 6. radius: the known field magnitude if given (output in its units), else det(M)^(-1/6) in raw
    units (det W = 1, MATLAB magcal's convention);
 7. report the RMS radial error before (centred on the data mean) and after, in percent;
@@ -501,9 +502,11 @@ def calibrate_mag(
             fits["full"] = (res_f, c_f, M_f, float(np.mean((rel_f * radius_f) ** 2)), 0, 0)
         return float(100 * np.sqrt(fits["full"][3]))
 
+    full_determined = selection.get("full", {}).get("well_determined", True)
     status = _plausibility(
-        status, chosen, rms_after, full_rms, before, after, semi_axes, sensor, warn
-    )
+        status, chosen, rms_after, full_rms, before, after, semi_axes, sensor, warn,
+        full_determined,
+    )  # fmt: skip
     cal = MagCalibration(
         center=centre,
         soft_iron=W,
@@ -552,9 +555,12 @@ def _plausibility(
     semi_axes: np.ndarray,
     sensor: str,
     warn: list[str],
+    full_determined: bool = True,
 ) -> str:
     """Downgrade a converged fit that no magnetometer ellipsoid explains (see the limits at the
-    top of the module); appends the cause and the remedy to ``warn``."""
+    top of the module); appends the cause and the remedy to ``warn``. ``full_determined``:
+    whether the data pin the full ellipsoid down (model='auto' passed it over if not: then
+    more orientations, not model='full', is the remedy)."""
     if not is_usable(status):
         return status
     what = "magnetometer" if sensor == "mag" else "sensor"
@@ -577,10 +583,16 @@ def _plausibility(
             )
             return "failed"
         if model != "full" and (best <= RMS_PLAUSIBLE_PCT or best <= 0.5 * rms_after):
-            warn.append(
-                f"the {model} model leaves an RMS radial error of {rms_after:.3g} % where a "
-                f"full ellipsoid leaves {best:.3g} %: this {what}'s soft iron needs "
+            remedy = (
                 "model='full' (or 'auto', --model full)"
+                if full_determined
+                else "a full ellipsoid, which these data do not determine: tumble through "
+                "more orientations"
+            )
+            warn.append(
+                f"the {model} model leaves an RMS radial error of {rms_after:.3g} % of its "
+                f"radius where a full ellipsoid leaves {best:.3g} % of the data's spread: "
+                f"this {what}'s soft iron needs {remedy}"
             )
             return "poorly_determined"
         warn.append(

@@ -38,6 +38,7 @@ from .gyro import GyroCalibration, calibrate_gyro
 from .io.files import as_log
 from .mag import calibrate_mag
 from .models import layout
+from .observations import TooFewPoses
 from .status import is_usable, worst_status
 
 
@@ -470,8 +471,9 @@ def calibrate_marg_log(
         except ValueError as exc:
             if accel == "static":
                 raise
+            why = exc.finding if isinstance(exc, TooFewPoses) else str(exc)  # no accel flags here
             warn.append(
-                f"accelerometer: paper 1's static calibration is not possible ({exc}); its "
+                f"accelerometer: paper 1's static calibration is not possible ({why}); its "
                 "ellipsoid is fitted instead"
             )
             method = "ellipsoid"

@@ -91,8 +91,10 @@ def test_columns_override_the_guess(tmp_path):
 
 @pytest.mark.parametrize("width", [5, 8, 11, 12])
 def test_other_widths_say_the_width_and_give_a_columns_example(tmp_path, width):
+    # no column only rises, so the example names no time column and asks for the rate
     p = _write(tmp_path, _table(np.ones((6, width)), "\t"))
-    with pytest.raises(ValueError, match=rf"no header and {width} columns.*--columns t,ax,ay,az"):
+    example = rf"no header and {width} columns.*--columns ax,ay,az,_.*else give --sample-rate"
+    with pytest.raises(ValueError, match=example):
         load_log(p)
 
 
@@ -413,6 +415,43 @@ def test_uneven_timestamps_give_the_mean_rate_with_a_note(tmp_path):
     steady = np.r_[0.0, np.cumsum(np.full(n - 1, 0.01))]
     plain = load_log(_write(tmp_path, _table(np.column_stack([steady, np.ones((n, 3))])), "e.csv"))
     assert plain.sample_rate == pytest.approx(100.0) and not any("uneven" in m for m in plain.notes)
+
+
+def test_vendor_exports_read_without_flags(tmp_path):
+    """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
+    MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and
+    every row ending in a tab: it was refused as '14 names but 15 fields'); a YEI 3-Space log
+    whose names sit in a '# Data format:' comment (it was read as 't, accel, gyro, mag' by
+    width: the gyro fitted as the accelerometer); an 11-column headerless Pololu log, refused
+    with the columns described and an example that puts t where a column only rises."""
+    rows = [[0.5 * i, 9.8, 0.1, 0.2, 0.01, 0.02, 0.03, 0.4, 0.5, 0.6] for i in range(40)]
+    xsens = ["// Start Time: 0", "// Sample rate: 50.0Hz", "// Scenario: 4.9"]
+    xsens += ["Counter\tAcc_X\tAcc_Y\tAcc_Z\tGyr_X\tGyr_Y\tGyr_Z\tMag_X\tMag_Y\tMag_Z"]
+    xsens += [" " + "\t".join(f"{v:g}" for v in r) + "\t" for r in rows]
+    log = load_log(_write(tmp_path, "\n".join(xsens) + "\n", "xsens.txt"))
+    np.testing.assert_array_equal(log.acc[0], [9.8, 0.1, 0.2])
+    np.testing.assert_array_equal(log.mag[0], [0.4, 0.5, 0.6])
+    assert log.sample_rate == 50.0
+    yei = '# Data format: "%int(ChipTimeUS),%float(RawGyroX),%float(RawGyroY),%float(RawGyroZ),'
+    yei += "%float(RawCompassX),%float(RawCompassY),%float(RawCompassZ),%float(RawAccelX),"
+    yei += '%float(RawAccelY),%float(RawAccelZ)"\n'
+    yei += "".join(f"{9000 * i},0.01,0.02,0.03,0.4,0.5,0.6,0.0,0.1,0.99\n" for i in range(40))
+    log = load_log(_write(tmp_path, yei, "yei.txt"))
+    np.testing.assert_array_equal(log.acc[0], [0.0, 0.1, 0.99])
+    np.testing.assert_array_equal(log.gyro[0], [0.01, 0.02, 0.03])
+    np.testing.assert_array_equal(log.mag[0], [0.4, 0.5, 0.6])
+    assert log.sample_rate == pytest.approx(1e6 / 9000)
+    assert any("column names read from the comment line" in n for n in log.notes)
+    pololu = "".join(
+        f"{(-1) ** i * 100} {50 - i} {1000 - i % 3} 1 2 3 4 5 6 {7 * i + 2} {7 * i + 3}\n"
+        for i in range(40)
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"10: 2\.\.275 rising \(time\?\).*--columns "
+        r"ax,ay,az,_,_,_,_,_,_,t,_ ",
+    ):
+        load_log(_write(tmp_path, pololu, "pololu.txt"))
 
 
 def test_truncated_or_corrupt_mat(tmp_path):

@@ -64,13 +64,13 @@ _ALIASES = {
 }
 # a time column named with its unit (time_ms, t_us, TimeStamp_ns): the unit itself is read from
 # the median step (_time_in_seconds), the name only says which column is time
-for _base in ("t", "time", "timestamp", "ts"):
+for _base in ("t", "time", "timestamp", "ts", "chiptime"):  # chiptime: YEI 3-Space's clock
     for _unit in ("", "s", "sec", "ms", "msec", "us", "usec", "ns", "nsec"):
         _ALIASES[_base + _unit] = "t"
 _SENSOR_NAMES = {
     "a": ("a", "acc", "accel", "accelerometer", "acceleration"),
     "g": ("g", "gyr", "gyro", "gyroscope", "w"),
-    "m": ("m", "mag", "magn", "magnetometer"),
+    "m": ("m", "mag", "magn", "magnetometer", "compass"),
 }
 for _k, _names in _SENSOR_NAMES.items():
     for _n in _names:
@@ -350,6 +350,45 @@ _DELIMS = ("\t", ";", ",", "|", None)
 _DELIM_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
 
 
+def _comment_text(line: str) -> str:
+    text = line.strip()
+    for mark in _COMMENTS:
+        if text.startswith(mark):
+            return text[len(mark) :].strip()
+    return text
+
+
+def _names_in_comment(line: str, delim: str | None, width: int) -> list[str] | None:
+    """Column names in a comment line, when it lists one per column and at least three are
+    sensor or time names: '# Data format: "%int(ChipTimeUS),%float(RawGyroX),..."' (a label
+    before a colon, quotes and printf wrappers are dropped)."""
+    text = _comment_text(line)
+    label, colon, rest = text.partition(":")
+    if colon and (delim is None or delim not in label):
+        text = rest
+    text = re.sub(r"%\w+\(([^)]*)\)", r"\1", text.strip().strip("\"'"))
+    names = _header_cells(text, delim)
+    known = sum(canonical_name(n) is not None for n in names)
+    return names if len(names) == width and known >= 3 else None
+
+
+def _rate_in_comment(line: str) -> float | None:
+    """A sample rate stated in a comment line ('// Sample rate: 50.0Hz', '# fs = 100')."""
+    m = re.fullmatch(r"([A-Za-z _]+?)\s*[:=]\s*([0-9.]+)\s*(hz)?", _comment_text(line), re.I)
+    if m and m.group(1).strip().lower() in _RATE_KEYS:
+        try:
+            return float(m.group(2))
+        except ValueError:
+            return None
+    return None
+
+
+def _line_end(line: str, delim: str) -> str:
+    """The line without its trailing white space, a tab kept when tabs separate the fields
+    (Xsens MT Manager ends every row with one: '1\t2\t3\t')."""
+    return line.rstrip(" \r\n\f\v" if delim == "\t" else None)
+
+
 def _sniff(lines: list[str], head: list[str] = ()) -> tuple[str | None, bool, int, bool]:
     """Separator, decimal commas, the usual row width, and whether rows end in a separator."""
     best = (0.0, 0, None, False, 0, False)
@@ -358,7 +397,7 @@ def _sniff(lines: list[str], head: list[str] = ()) -> tuple[str | None, bool, in
         # a separator ending most rows ('1,2,3,') does not start an empty last column
         # (in 9 of 10 rows at both ends: an empty last column at the end of a log is not one)
         trailing = d is not None and all(
-            10 * sum(ln.rstrip().endswith(d) for ln in part) >= 9 * len(part)
+            10 * sum(_line_end(ln, d).endswith(d) for ln in part) >= 9 * len(part)
             for part in (lines, head or lines)
         )
         if trailing:
@@ -408,7 +447,9 @@ def _parse_rows(
     if dec:
         rows = [ln.replace(",", ".") for ln in rows]
     if trailing:
-        rows = [ln.rstrip()[:-1] if ln.rstrip().endswith(delim) else ln for ln in rows]
+        rows = [
+            _line_end(ln, delim)[:-1] if _line_end(ln, delim).endswith(delim) else ln for ln in rows
+        ]
     rows = [ln.split("#", 1)[0] if "#" in ln else ln for ln in rows]
     if delim is None:
         widths = [len(ln.split()) for ln in rows]
@@ -635,9 +676,19 @@ def _read_text(
                 "line(s) under the header skipped: " + "; ".join(",".join(r[1]) for r in others)
             )
         stop = min(r[0] for r in header_rows)
+    if header is None:  # names in a comment line above the data (YEI 3-Space's '# Data format')
+        for ln in reversed(lines[:start]):
+            names = _names_in_comment(ln, delim, width) if _skip(ln) and ln.strip() else None
+            if names:
+                header = names
+                notes.append(f"column names read from the comment line {ln.strip()[:70]!r}")
+                break
     preamble: dict[str, float] = {}
     ignored = []
     for ln in lines[:stop]:
+        rate = _rate_in_comment(ln) if _skip(ln) else None
+        if rate is not None:
+            preamble["sample rate"] = rate
         if _skip(ln):
             continue
         cells = [_strip_cell(c) for c in _cells(ln, delim)]
@@ -1064,8 +1115,9 @@ def _assemble(
                     "needs x, y and z (at least 3)"
                 )
             raise ValueError(
-                f"{path} has no header and {width} columns; say what they are with --columns, "
-                f"e.g. --columns {_example(width)} ('_' skips a column)"
+                f"{path} has no header and {width} columns ({_describe_columns(data)}); say "
+                f"what they are with --columns, e.g. --columns {_example(width, data)} ('_' "
+                "skips a column; t for a time column, else give --sample-rate)"
             )
         cols, why = guess
         source = {c: i for i, c in enumerate(cols)}
@@ -1215,7 +1267,35 @@ def _time_in_seconds(t: np.ndarray) -> tuple[np.ndarray, str | None, float]:
     return t, None, 1.0
 
 
-def _example(width: int) -> str:
-    """A positional --columns example with `width` entries."""
-    base = ["t", "ax", "ay", "az"] if width >= 4 else ["ax", "ay", "az"]
-    return ",".join((base + ["_"] * width)[: max(width, 3)])
+def _rising(col: np.ndarray) -> bool:
+    """A column that only goes up (a time or sample counter)."""
+    c = col[np.isfinite(col)]
+    return bool(c.size > 2 and np.all(np.diff(c) >= 0) and c[-1] > c[0])
+
+
+def _describe_columns(data: np.ndarray) -> str:
+    """Each column's range, and which only rise (time?): what a user needs to map them."""
+    parts = []
+    for j in range(data.shape[1]):
+        c = data[:, j][np.isfinite(data[:, j])]
+        if c.size == 0:
+            parts.append(f"{j + 1}: empty")
+            continue
+        rng = f"{c.min():.4g}..{c.max():.4g}"
+        parts.append(f"{j + 1}: {rng}" + (" rising (time?)" if _rising(data[:, j]) else ""))
+    return "columns " + ", ".join(parts)
+
+
+def _example(width: int, data: np.ndarray | None = None) -> str:
+    """A positional --columns example with `width` entries: t at the first column that only
+    rises (none: no t), then ax, ay, az at the first three others."""
+    names = ["_"] * max(width, 3)
+    rising = [] if data is None else [j for j in range(width) if _rising(data[:, j])]
+    if data is None and width >= 4:
+        rising = [0]
+    if rising:
+        names[rising[0]] = "t"
+    free = [j for j in range(len(names)) if names[j] == "_"]
+    for name, j in zip(("ax", "ay", "az"), free, strict=False):
+        names[j] = name
+    return ",".join(names)
