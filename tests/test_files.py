@@ -10,6 +10,7 @@ import bz2
 import gzip
 import os
 import string
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -452,6 +453,28 @@ def test_vendor_exports_read_without_flags(tmp_path):
         r"ax,ay,az,_,_,_,_,_,_,t,_ ",
     ):
         load_log(_write(tmp_path, pololu, "pololu.txt"))
+
+
+SKINEMATICS = Path(__file__).parent / "data" / "skinematics"
+
+
+def test_scikit_kinematics_vendor_logs(capsys):
+    """The three real files behind test_vendor_exports_read_without_flags (NOTES.md beside
+    them): each layout read without flags, checked against its vendor's documented columns and
+    units (scikit-kinematics' own readers), and the Pololu refusal through the CLI."""
+    from calib_jax.cli import main
+
+    xsens = load_log(SKINEMATICS / "data_xsens.txt")
+    assert xsens.sample_rate == 50.0 and xsens.acc.shape == (953, 3)
+    assert 5 < np.median(np.linalg.norm(xsens.acc, axis=1)) < 15  # m/s^2, hand-held
+    yei = load_log(SKINEMATICS / "data_yei.txt")
+    assert yei.sample_rate == pytest.approx(109.9, abs=0.1)  # us time column
+    assert np.median(np.linalg.norm(yei.acc, axis=1)) == pytest.approx(1.0, abs=0.02)  # g
+    assert np.median(np.linalg.norm(yei.mag, axis=1)) == pytest.approx(0.53, abs=0.05)  # gauss
+    assert np.median(np.linalg.norm(yei.gyro, axis=1)) < 0.1  # rad/s, mostly still
+    assert main(["accel", str(SKINEMATICS / "data_polulu.txt")]) == 2
+    err = capsys.readouterr().err
+    assert "10: " in err and "rising (time?)" in err and "--columns ax,ay,az," in err
 
 
 def test_truncated_or_corrupt_mat(tmp_path):
