@@ -42,7 +42,7 @@ from .accel import (
     no_accelerometer_unit,
 )
 from .calibration import BatchRecord
-from .geometry import centre_and_scale, moments
+from .geometry import moments, normalised_moments
 from .linalg import cholesky_small, eigh_small, inv3
 from .lm import lm_solve
 from .mag import ellipsoid_start_moments
@@ -281,9 +281,7 @@ def _batch_moments(raw, valid):
         # non-finite samples are masked out here, inside the one pass over the data (an eager
         # isfinite + where before the call read and wrote all of it twice more)
         v = v & jnp.all(jnp.isfinite(r), axis=-1)
-        r = jnp.where(v[:, None], r, 0.0)  # NaN never enters the arithmetic
-        mean, k = centre_and_scale(r, v.astype(r.dtype))
-        return moments((r - mean) / k, v.astype(r.dtype)), mean, k
+        return normalised_moments(r, v.astype(r.dtype))
 
     return jax.lax.map(one, (raw, valid), batch_size=8)
 

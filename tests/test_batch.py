@@ -156,5 +156,11 @@ def test_sharded_over_two_devices_equals_unsharded(tmp_path):
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
     subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=300)
     sharded = np.load(tmp_path / "sharded.npy")
-    local = np.asarray(calibrate_accel_batch(raw).params)
-    np.testing.assert_allclose(sharded, local, rtol=1e-12)
+    local = calibrate_accel_batch(raw)
+    # Each device holds 4 of the 8 padded sensors, and XLA vectorises the moment pass's sums by
+    # the chunk's shape: the sums differ in their last bits, and the LM stops at another point
+    # of chi2's round-off plateau (the round-off stop, calib_jax.lm.gavin; test_pipeline's
+    # test_fit_batch_equals_single_fits_and_masks_padding derives its width: ~1e-5 standard
+    # errors). 1e-4 standard errors is that bound with margin; 5e-10 relative was seen.
+    diff = np.abs(sharded - np.asarray(local.params))
+    assert np.all(diff <= 1e-4 * np.asarray(local.stderr)), diff / np.asarray(local.stderr)

@@ -341,6 +341,27 @@ def test_moments_are_the_weighted_monomial_products():
     np.testing.assert_allclose(S, (phi * w[:, None]).T @ phi, rtol=1e-12, atol=1e-12 * w.sum())
 
 
+def test_normalised_moments_are_the_moments_of_the_normalised_samples():
+    """The batch's one pass (mean, then power sums about it, the scale from those sums) against
+    centre_and_scale then moments of (x - mean) / scale, on a sphere far off the origin (raw
+    counts: centre 30,000, radius 16,000) with padding rows holding NaN: the same numbers to
+    round-off (the scale divides each sum by a power of it: no cancellation)."""
+    from calib_jax.geometry import centre_and_scale, normalised_moments
+
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(300, 3))
+    x = 30_000 + 16_000 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    x[-20:] = np.nan  # padding
+    w = np.r_[rng.uniform(0.5, 2.0, 280), np.zeros(20)]
+    S, mean, k = normalised_moments(jnp.asarray(x), jnp.asarray(w))
+    m0, k0 = centre_and_scale(jnp.asarray(x), jnp.asarray(w))
+    xn = (np.nan_to_num(x) - np.asarray(m0)) / float(k0)
+    np.testing.assert_allclose(mean, m0, rtol=1e-14)
+    np.testing.assert_allclose(k, k0, rtol=1e-13)
+    ref = np.asarray(moments(jnp.asarray(xn), jnp.asarray(w)))
+    np.testing.assert_allclose(S, ref, rtol=1e-12, atol=1e-12 * w.sum())
+
+
 def test_the_logs_notes_are_notes_and_left_out_samples_are_warnings(tmp_path):
     """A headerless log's loader note (how its columns were read) is among the record's notes,
     and the rows left out (NaN) are a warning, not a note. Before, calibrate_mag replaced the
