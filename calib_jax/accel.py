@@ -197,7 +197,10 @@ UNIT_BANDS = {"g": (0.7, 1.4), "m/s^2": (7.0, 14.0), "counts": (30.0, np.inf)}
 beyond that is no accelerometer in that unit: a magnetometer in gauss reads 0.25-0.65, a
 gyroscope at rest near 0). Raw counts have any scale above 30."""
 
-_UNIT_RANGES = "g: 0.7-1.4, m/s^2: 7-14, counts: above 30"
+_UNIT_RANGES = ", ".join(
+    f"{u}: {lo:g}-{hi:g}" if np.isfinite(hi) else f"{u}: above {lo:g}"
+    for u, (lo, hi) in UNIT_BANDS.items()
+)
 
 
 def _units_from_norm(norm: float) -> str | None:
@@ -335,6 +338,34 @@ def _holds_six_faces(pts: np.ndarray, centre: np.ndarray, within_deg: float = 30
     return bool(np.all(d.max(axis=0) >= cos) and np.all(-d.min(axis=0) >= cos))
 
 
+def _check_poses_for(
+    model: str, obs: AccelObservations, sample_rate: float | None, notes: list[str]
+) -> tuple[np.ndarray, float, str]:
+    """:func:`check_poses` for ``model``; "auto" is paper 1's nine parameters, or six (with a
+    note) where the log holds 6-8 distinct poses that include each axis up and down."""
+    if model != "auto":
+        return (*check_poses(obs, model, sample_rate), model)
+    try:
+        return (*check_poses(obs, "accel9", sample_rate), "accel9")
+    except TooFewPoses as exc:
+        if exc.n_distinct < 6:
+            raise
+        c_s, r_s = check_poses(obs, "accel6", sample_rate)
+        if not _holds_six_faces(obs.points, c_s):
+            raise TooFewPoses(
+                f"{exc.finding}; nor do the poses hold each axis pointing up and down, which "
+                "the six-parameter model needs",
+                exc.n_distinct,
+                "auto",
+            ) from None
+        notes.append(
+            f"model accel6 (gains and biases; the cross terms held at zero): the log holds "
+            f"{exc.n_distinct} distinct poses with each axis up and down, too few for paper "
+            "1's nine parameters (--model accel9 insists)"
+        )
+        return c_s, r_s, "accel6"
+
+
 # ---------------------------------------------------------------------------------------------
 # the public entry point
 
@@ -438,27 +469,7 @@ def calibrate_accel(
     notes: list[str] = log_notes + obs.notes
     report, means, pts = obs.report, obs.means, obs.points
 
-    if model == "auto":  # paper 1's nine parameters, or six where the poses allow no more
-        try:
-            c_s, r_s = check_poses(obs, model := "accel9", sample_rate)
-        except TooFewPoses as exc:
-            if exc.n_distinct < 6:
-                raise
-            c_s, r_s = check_poses(obs, model := "accel6", sample_rate)
-            if not _holds_six_faces(obs.points, c_s):
-                raise TooFewPoses(
-                    f"{exc.finding}; nor do the poses hold each axis pointing up and down, "
-                    "which the six-parameter model needs",
-                    exc.n_distinct,
-                    "auto",
-                ) from None
-            notes.append(
-                f"model accel6 (gains and biases; the cross terms held at zero): the log holds "
-                f"{exc.n_distinct} distinct poses with each axis up and down, too few for paper "
-                "1's nine parameters (--model accel9 insists)"
-            )
-    else:
-        c_s, r_s = check_poses(obs, model, sample_rate)
+    c_s, r_s, model = _check_poses_for(model, obs, sample_rate, notes)
     static_norm = obs.static_norm
     n_free = int(sum(MODELS[model]))
 
