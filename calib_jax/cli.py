@@ -296,7 +296,9 @@ def run_batch(args: argparse.Namespace) -> int:
     else:
         options.update(field=args.field, model=args.model or "full")
     files = f"{len(paths)} file{'s' if len(paths) != 1 else ''}"
-    print(f"calib-jax batch: {files} under {root}, sensor {args.sensor}")
+    # one model for every log of a batch (calib-jax accel / mag choose per log)
+    model = f", model {options['model']} for every log" if "model" in options else ""
+    print(f"calib-jax batch: {files} under {root}, sensor {args.sensor}{model}")
     if args.dask is not None:
         results = calibrate_files_dask(
             paths,
@@ -668,7 +670,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="gyro: each log through calib-jax gyro's fit (poses with turns, a time column or "
         "--sample-rate); rms is then the miss between poses in degrees",
     )
-    b.add_argument("--model", default=None, help="accel9|accel6 or sphere|diag|full")
+    b.add_argument(
+        "--model",
+        default=None,
+        help="accel9|accel6 (default accel9) or sphere|diag|full (default full): one model for "
+        "every log, where calib-jax accel and mag choose per log",
+    )
     b.add_argument(
         "--g",
         type=_pos_float,
