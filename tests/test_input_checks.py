@@ -260,6 +260,22 @@ def test_mag_fit_leaves_saturated_samples_out():
     np.testing.assert_allclose(cal.soft_iron, np.linalg.inv(A), atol=0.02)  # W (m - c) = B d
 
 
+def test_a_reading_held_over_rows_is_not_a_clip():
+    """A magnetometer read on a faster clock repeats each reading over several rows (a Pololu
+    MinIMU-9 log: 93 % of its rows; 'axis y is saturated at its max (806, 29 samples)' was
+    reported for an axis far from its range). Each held reading counts once; a real clip in
+    such a log is still found."""
+    from calib_jax.observations import saturated_axes
+
+    x = np.round(_tumble(n=400, seed=4), 1)
+    x[[10, 200, 300], 0] = x[:, 0].max() + 0.1  # three readings at the top of axis x
+    held = np.repeat(x, 8, axis=0)  # every reading held for 8 rows: 24 rows at the top
+    assert saturated_axes(x) == [] and saturated_axes(held) == []
+    clipped = held.copy()
+    clipped[:, 0] = np.minimum(clipped[:, 0], 30.0)
+    assert (0, "max", 30.0) in saturated_axes(clipped)
+
+
 @pytest.mark.parametrize("scale", [1e300, 1e200, 1e-200])
 def test_mag_fit_extreme_values_are_a_value_error(scale):
     """Values whose squares over- or underflow float64 (and a corrupt row of 1e308) are a
