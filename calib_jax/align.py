@@ -438,19 +438,33 @@ def align_mag_to_accel(
     if hemisphere not in (None, "north", "south"):
         raise ValueError(f"hemisphere must be 'north', 'south' or None, got {hemisphere!r}")
     search = permutation_search(a, m, hemisphere) if search_permutations else None
-    P = np.eye(3) if search is None else search.permutation
+    # a map is applied only where it wins by the margin the diagnosis asks of a finding: with
+    # few samples or little coverage several maps fit about as well, and the best of them
+    # means nothing (an Xsens MTi's factory-aligned axes read 'y <- -z, z <- +y' from 61
+    # samples at 26 % coverage)
+    P = search.permutation if search is not None and search.found else np.eye(3)
     scores = {}
     if search is not None:
         Ps = signed_permutations()
         scores = {
             describe_permutation(Q): float(v) for Q, v in zip(Ps, search.spreads, strict=True)
         }
-        if not search.is_identity:
+        spreads = (
+            f"spread of a.m {search.spreads[search.index]:.4f} against "
+            f"{search.spread_as_labelled:.4f} unpermuted and {search.spread_next:.4f} for the "
+            "next map"
+        )
+        if search.found:
             warn.append(
                 "the magnetometer axes look permuted against the accelerometer: "
-                f"{describe_permutation(P)} (det {np.linalg.det(P):+.0f}; spread of a.m "
-                f"{search.spreads[search.index]:.4f} against {search.spread_as_labelled:.4f} "
-                "unpermuted)"
+                f"{describe_permutation(P)} (det {np.linalg.det(P):+.0f}; {spreads})"
+            )
+        elif not search.is_identity:
+            warn.append(
+                f"the map {describe_permutation(search.permutation)} of the magnetometer axes "
+                f"fits best ({spreads}), but not {PERMUTATION_MARGIN:g}x better than both the "
+                "axes as labelled and the next map: these data cannot tell the maps apart, so "
+                "the axes are kept as labelled; tumble through more orientations to decide"
             )
     theta0 = float(np.mean(np.arccos(np.clip(np.sum(a * (m @ P.T), axis=1), -1.0, 1.0))))
     p0 = jnp.asarray(np.array([0.0, 0.0, 0.0, theta0]))
