@@ -96,8 +96,9 @@ def test_too_few_poses_advice_names_only_the_commands_own_flags(capsys):
     poses used to offer both (a new user's run on imucal's Ferraris session)."""
     ferraris = shared_file("imucal_ferraris/example_ferraris_session.csv")
     assert main(["diagnose", str(ferraris)]) == 2
-    err = capsys.readouterr().err
+    out, err = capsys.readouterr()
     assert "only 6 distinct poses" in err and "calib-jax accel fits such a log" in err
+    assert "only 6 distinct poses" not in out  # said once, on the error line
     assert "--model" not in err and "--use" not in err
     from calib_jax.cli import _error_text, build_parser
     from calib_jax.observations import TooFewPoses

@@ -59,7 +59,10 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         d = diagnose_mag(log, model=args.model, **common)
-    print(d.summary())
+    summary = d.summary()
+    if d.verdict == "not_possible" and d.notes:  # its reason is the error line below
+        summary = summary.replace(f"\n  note: {d.notes[0]}", "", 1)
+    print(summary)
     if args.json_out:
         text = json.dumps(d.to_dict(), indent=2)
         if args.json_out == "-":
