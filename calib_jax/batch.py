@@ -5,14 +5,16 @@ phi(x) = [x^2, y^2, z^2, 2xy, 2xz, 2yz, x, y, z, 1] every residual is linear in 
 
     e_i(p) = phi(x_i)' theta(p),
 
-so chi2(p) = theta' S theta with the 10 x 10 moment matrix S = sum_i w_i phi_i phi_i'. One pass
-over the samples gives S; after that the LM iterations never touch the samples again. With
+so chi2(p) = theta' S theta with the 10 x 10 moment matrix S = sum_i w_i phi_i phi_i'. Two passes
+over the samples give S (the mean, then the 35 power sums of degree <= 4 about it:
+:func:`calib_jax.geometry.normalised_moments`); after that the LM iterations never touch the
+samples again. With
 S = L L' (a symmetric square root), the ten "virtual residuals" r(p) = L' theta(p) have
 |r|^2 = chi2 and J_r' J_r = D' S D (D = dtheta/dp): the very normal equations of the
 sample-level fit, which the unchanged LM solver (:func:`calib_jax.lm.lm_solve`) then solves,
 with the samples' degrees of freedom for the covariance.
 
-Per sensor the work is one pass over N samples (about 100 N flops for S) plus a few dozen
+Per sensor the work is two passes over N samples (about 80 N flops for S) plus a few dozen
 10 x 9 operations per iteration, instead of an (N x 9) Jacobian per iteration. Everything is
 vmapped over sensors with per-member state; a sensor with too few valid samples or with all
 directions in one plane gets its own status (nothing fitted, NaN parameters) and leaves the
@@ -271,14 +273,16 @@ def _batch_moments(raw, valid):
     """(S, mean, k) per sensor: moments of the normalised samples, one sensor at a time.
 
     lax.map in chunks of 8 sensors, not one vmap over all: a chunk's samples (0.9 MB for
-    4,800 each) stay in cache for the mean, the radius and the moment products; a vmap over
-    the whole batch materialises every sensor's monomials at once and ran 3-4x slower here
-    (0.48 against 0.15 ms per sensor), one sensor at a time about 10 % slower than chunks.
+    4,800 each) stay in cache for the mean and the power sums; a vmap over the whole batch
+    materialises every sensor's monomials at once and ran 3-4x slower here (0.48 against 0.15
+    ms per sensor, with the earlier 6 x 10 product), one sensor at a time about 10 % slower
+    than chunks; chunks of 4, 16 and 32 measured 0.101, 0.117 and 0.123 ms against 0.105
+    for 8 (benchmarks/moment_pass.py times the pass).
     """
 
     def one(args):
         r, v = args
-        # non-finite samples are masked out here, inside the one pass over the data (an eager
+        # non-finite samples are masked out here, inside the passes over the data (an eager
         # isfinite + where before the call read and wrote all of it twice more)
         v = v & jnp.all(jnp.isfinite(r), axis=-1)
         return normalised_moments(r, v.astype(r.dtype))
