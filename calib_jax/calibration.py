@@ -575,6 +575,15 @@ def _value_equal(x, y) -> bool:
     return bool(x == y)
 
 
+def _selection_flag(v: dict) -> str:
+    """Why a candidate magnetometer model could not be chosen, for the BIC line."""
+    if not v.get("usable", True):
+        return "; not converged or ran away"
+    if not v.get("well_determined", True):
+        return "; not determined"
+    return ""
+
+
 def _fields_equal(a, b):
     if type(a) is not type(b):
         return NotImplemented
@@ -823,9 +832,10 @@ class MagCalibration(Record):
         ]
         if len(self.model_selection) > 1:
             out.append(
-                "model choice (BIC, lower is better): "
+                "model choice (BIC, lower is better, among the models the data determine, else "
+                "among those that converged to a bounded ellipsoid): "
                 + ", ".join(
-                    f"{m} {v['bic']:.1f} ({v['rms_pct']:.3f} %)"
+                    f"{m} {v['bic']:.1f} ({v['rms_pct']:.3f} %{_selection_flag(v)})"
                     for m, v in self.model_selection.items()
                 )
             )

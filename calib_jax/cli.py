@@ -416,7 +416,9 @@ def run_marg(args: argparse.Namespace) -> int:
     _enable_x64()
     from .marg import calibrate_marg_log
 
-    log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate)
+    # sensor="mag": a headerless 6-column file is accelerometer then magnetometer, as calib-jax
+    # mag reads it (it was read as accelerometer + gyro, and marg then asked for mx, my, mz)
+    log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="mag")
     if args.accel in ("ellipsoid", "none") and (
         detector_options(args, log.sample_rate) or args.block is not None
     ):

@@ -596,3 +596,17 @@ def test_random_files_and_options_never_give_a_traceback(command, content, optio
             rc = main(argv)
     assert rc in (0, 1, 2), (argv, rc, err.getvalue())
     assert "Traceback" not in err.getvalue() and "internal error" not in err.getvalue()
+
+
+def test_marg_reads_a_headerless_six_column_file_as_accel_then_mag(tmp_path, capsys):
+    """A headerless 6-column log (uBot's LSM303: acceleration then field) was read by marg as
+    accelerometer + gyro and refused ('needs ... mx, my, mz'), while calib-jax mag read the
+    same file as accelerometer then magnetometer. marg now reads it as mag does."""
+    from calib_jax.io import load_log
+
+    tumble = load_log(cj.mag_demo_log_path())
+    path = tmp_path / "accmag.csv"
+    np.savetxt(path, np.column_stack([tumble.acc, tumble.mag])[::4], delimiter=",")
+    code = main(["marg", str(path), "--accel", "none"])
+    out, err = capsys.readouterr()
+    assert "read as ax ay az mx my mz" in out + err and code in (0, 1), err

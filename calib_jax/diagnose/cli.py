@@ -25,7 +25,8 @@ def run(args: argparse.Namespace) -> int:
         args.file,
         columns=args.columns,
         sample_rate=args.sample_rate,
-        sensor=args.sensor if args.sensor in ("accel", "mag") else None,
+        # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
+        sensor="mag" if args.sensor == "marg" else args.sensor,
     )
     detector = detector_options(args, args.sample_rate or log.sample_rate)
     if detector and args.sensor != "accel":
