@@ -314,6 +314,26 @@ def _screened(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, list[str]]:
     return xv, mean, s, warn
 
 
+BARELY_TURNED = 3.0
+"""A log whose RMS spread is within this many times its sample-to-sample noise was hardly
+turned (a tumble spreads by hundreds of times its noise). Samples out of time order look the
+same to this test, so it refuses only a fit that is poorly determined and leaves a residual no
+shell explains, of samples far from zero next to their spread (one field plus noise; a
+shuffled cap of a tumble lies on its shell, a cloud about zero is no field held)."""
+
+
+def _barely_turned(xv: np.ndarray, spread: float) -> bool:
+    """Whether the samples spread by no more than :data:`BARELY_TURNED` times their noise,
+    estimated from consecutive differences (rows that repeat the row before, a reading held
+    over a faster clock, left out)."""
+    d = np.diff(xv, axis=0)
+    d = d[np.any(d != 0, axis=1)]
+    if len(d) < 10:
+        return True  # nothing but held readings: the field never changed
+    noise = float(np.sqrt(np.sum((1.4826 * np.median(np.abs(d), axis=0) / np.sqrt(2)) ** 2)))
+    return spread <= BARELY_TURNED * noise
+
+
 def _check_not_flat(xn: np.ndarray) -> None:
     """A ValueError when the normalised samples' directions lie in one plane."""
     if len(xn) > MOMENT_FORM_ABOVE:
@@ -493,6 +513,21 @@ def calibrate_mag(
     raw_err = nr / nr.mean() - 1.0
     after = ny / radius - 1.0
     rms_after = float(100 * np.sqrt(np.mean(after**2)))
+
+    if (
+        status == "poorly_determined"
+        and not rms_after <= RMS_PLAUSIBLE_PCT  # off any shell: a ball of noise
+        and np.linalg.norm(mean) > 3 * s  # about a field far from zero: one field held
+        and _barely_turned(xv, s)
+    ):
+        warn.append(
+            f"the field barely changes in the sensor frame: the samples spread by {s:.3g} "
+            f"(RMS), within {BARELY_TURNED:g}x of their sample-to-sample noise, and lie on no "
+            f"shell (RMS radial error {rms_after:.3g} % after the fit): the sensor was hardly "
+            "turned and this is no calibration (the 'centre' is the field itself). Record a "
+            "slow tumble through all orientations"
+        )
+        status = "failed"
 
     def full_rms() -> float:
         """RMS radial error (percent of the data radius) of the full ellipsoid: whether the

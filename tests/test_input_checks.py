@@ -495,3 +495,20 @@ def test_a_stuck_axis_is_named():
     raw[:, 1] = 0.25
     with pytest.raises(ValueError, match="axis y reads 0.25 in every sample while the others"):
         calibrate_accel(raw, sample_rate=s.sample_rate)
+
+
+def test_a_magnetometer_that_never_turned_is_no_calibration():
+    """uBot's LSM303 'no movement' log (512 samples): calib-jax mag reported a hard iron (the
+    field itself), a radius of 1.8 uT, 26 % coverage, status poorly_determined and exit 0.
+    A log spreading by no more than 3x its sample-to-sample noise, on no shell, fails and says
+    why; a shuffled cap of a tumble (no time order, on its shell) is not refused by this."""
+    rng = np.random.default_rng(5)
+    still = np.array([-37.6, -62.5, 1.3]) + 0.4 * rng.normal(size=(512, 3))
+    cal = _fit(still)
+    assert cal.status == "failed"
+    assert any("the field barely changes" in w for w in cal.warnings), cal.warnings
+    x = _tumble(seed=1)
+    cap = x[(x - CENTRE) @ np.array([0.0, 0.0, 1.0]) > 0]
+    cap = cap[rng.permutation(len(cap))]
+    shuffled = _fit(cap)
+    assert not any("the field barely changes" in w for w in shuffled.warnings)
