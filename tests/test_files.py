@@ -779,3 +779,11 @@ def test_every_fit_takes_a_file_path(tmp_path):
     missing = tmp_path / "nope.csv"
     with pytest.raises(ValueError, match="nope.csv"):
         cj.calibrate_accel(missing)
+
+
+def test_rows_in_brackets_say_what_was_found(tmp_path):
+    """uBot's LSM303 logs print a Python tuple per sample: the error quoted nothing and said
+    'no row of 6 numbers found' of rows that hold six numbers in brackets."""
+    rows = "".join(f"(({i}.5, -0.05, 10.5), (-38.7, -60.9, 0.9))\n" for i in range(30))
+    with pytest.raises(ValueError, match=r"first line: '\(\(0\.5, -0\.05.*brackets"):
+        load_log(_write(tmp_path, rows, "tuples.txt"))

@@ -622,7 +622,13 @@ def _read_text(
             None,
         )
     if start is None:
-        raise ValueError(f"{path}: no row of {width} numbers found")
+        first = next((ln.strip() for ln in lines if not _skip(ln)), "")
+        raise ValueError(
+            f"{path}: no row of {width} plain numbers found (first line: {first[:80]!r}); a log "
+            "holds one sample per line, numbers separated by commas, semicolons, tabs or "
+            "spaces (brackets or other text around them are not read): convert it, e.g. "
+            "'t,ax,ay,az' then one row of numbers per sample"
+        )
 
     # walk back from the first data row: ragged rows of numbers, then the header (a text line,
     # possibly followed by a units line), then the preamble
