@@ -74,6 +74,11 @@ POOR_STDERR = 1e-2
 # coverage: smallest eigenvalue of the direction scatter (1/3 for a uniform sphere, 0 for a
 # circle in one plane); below FLAT the shape along the normal is unobservable
 FLAT = 0.01
+# the same judged on the samples themselves (smallest / largest eigenvalue of their covariance):
+# a sphere fit through a circle puts its centre anywhere along the normal, and about such a
+# centre a noisy circle's directions look like a cone (uBot's robot turning on the floor:
+# 0.0022 here, a 17-degree cap about 0.005)
+FLAT_POINTS = 0.005
 # a fitted mean radius this many times the data's RMS radius means the ellipsoid ran away
 # (partial coverage lets a huge ellipsoid pass through a cap of data)
 RUNAWAY = 10.0
@@ -336,6 +341,9 @@ def _barely_turned(xv: np.ndarray, spread: float) -> bool:
 
 def _check_not_flat(xn: np.ndarray) -> None:
     """A ValueError when the normalised samples' directions lie in one plane."""
+    evals, evecs = np.linalg.eigh(np.cov(xn[:: max(1, len(xn) // 100_000)].T))
+    if evals[0] < FLAT_POINTS * evals[2]:
+        raise ValueError(_one_plane(evecs[:, 0]))
     if len(xn) > MOMENT_FORM_ABOVE:
         cs = np.asarray(sphere_fit_moments(jnp.asarray(moments_of(xn)))[0])
     else:
@@ -344,12 +352,16 @@ def _check_not_flat(xn: np.ndarray) -> None:
     dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)  # in place
     _, min_eig, unseen = sphere_coverage(dirs)
     if min_eig < FLAT:
-        raise ValueError(
-            f"the field directions lie in one plane (normal {_vec(unseen)} in the sensor frame): "
-            "this looks like a turn about a single axis, which cannot determine an ellipsoid. "
-            "Tumble the sensor through all orientations; a one-axis turn is what the plane "
-            "alignment (calib_jax.align.plane_alignment) needs instead"
-        )
+        raise ValueError(_one_plane(unseen))
+
+
+def _one_plane(normal: np.ndarray) -> str:
+    return (
+        f"the field directions lie in one plane (normal {_vec(normal)} in the sensor frame): "
+        "this looks like a turn about a single axis, which cannot determine an ellipsoid. "
+        "Tumble the sensor through all orientations; a one-axis turn is what the plane "
+        "alignment (calib_jax.align.plane_alignment) needs instead"
+    )
 
 
 def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:

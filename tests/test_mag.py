@@ -413,3 +413,16 @@ def test_cell_hits_in_chunks_count_as_at_once():
     for chunk in (1, 7, 1000, 4096):
         np.testing.assert_array_equal(cell_hits(d, chunk=chunk), whole)
     assert whole.sum() == 1000
+
+
+def test_a_noisy_turn_about_one_axis_is_rejected_too():
+    """uBot's LSM303 on a robot turning on the floor: the field draws a noisy arc (thickness
+    ~5 % of its radius), calib-jax mag exited 0 with a hard iron along the turn axis. The
+    directions about a sphere fitted through a noisy circle look like a cone, so the flatness
+    is judged on the samples themselves as well."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 2 * np.pi, 800)
+    x = np.stack([12 * np.cos(t), 12 * np.sin(t), 0 * t], 1) + [-56.0, -59.0, -1.0]
+    x += 0.55 * rng.normal(size=x.shape)
+    with pytest.raises(ValueError, match="one plane.*Tumble"):
+        calibrate_mag(x)
