@@ -447,9 +447,8 @@ def _parse_rows(
     if dec:
         rows = [ln.replace(",", ".") for ln in rows]
     if trailing:
-        rows = [
-            _line_end(ln, delim)[:-1] if _line_end(ln, delim).endswith(delim) else ln for ln in rows
-        ]
+        ends = (_line_end(ln, delim) for ln in rows)  # once per row: this runs on every row
+        rows = [e[:-1] if e.endswith(delim) else ln for ln, e in zip(rows, ends, strict=True)]
     rows = [ln.split("#", 1)[0] if "#" in ln else ln for ln in rows]
     if delim is None:
         widths = [len(ln.split()) for ln in rows]
