@@ -18,8 +18,8 @@ import scipy.io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from calib_jax.io import canonical_name, load_log, parse_columns
 from calib_jax.io import files as F
-from calib_jax.io import load_log, parse_columns
 
 ROWS = np.array(
     [
@@ -787,3 +787,66 @@ def test_rows_in_brackets_say_what_was_found(tmp_path):
     rows = "".join(f"(({i}.5, -0.05, 10.5), (-38.7, -60.9, 0.9))\n" for i in range(30))
     with pytest.raises(ValueError, match=r"first line: '\(\(0\.5, -0\.05.*brackets"):
         load_log(_write(tmp_path, rows, "tuples.txt"))
+
+
+def test_ros_px4_and_phone_export_names_read_without_flags(tmp_path):
+    """Headers a fourth new user's run met, none recognised before (each needed --columns, and
+    the error's example mapped time and gyro as the accelerometer): ROS ``rostopic echo -p``
+    (a '%time' header line, ``field.linear_acceleration.x``; its covariance columns are no
+    readings), PX4 ``ulog2csv`` (``accelerometer_m_s2[0]``), phyphox (the sensor only in the
+    unit, ``X (µT)``). The header lines are these tools' own; the rows are made up."""
+    ros = "%time,field.header.seq,field.orientation.x,field.angular_velocity.x,"
+    ros += "field.angular_velocity.y,field.angular_velocity.z,field.angular_velocity_covariance0,"
+    ros += "field.linear_acceleration.x,field.linear_acceleration.y,field.linear_acceleration.z\n"
+    ros += "".join(f"{10**8 * i},{i},0,0.1,0.2,0.3,-1,1.5,2.5,9.7\n" for i in range(1, 41))
+    log = load_log(_write(tmp_path, ros, "ros.csv"))
+    assert log.columns["gx"] == "field.angular_velocity.x"
+    np.testing.assert_array_equal(log.acc[0], [1.5, 2.5, 9.7])
+    np.testing.assert_array_equal(log.gyro[0], [0.1, 0.2, 0.3])
+    assert log.sample_rate == pytest.approx(10.0)  # ns stamps, 0.1 s apart
+    px4 = "timestamp,gyro_rad[0],gyro_rad[1],gyro_rad[2],gyro_integral_dt,"
+    px4 += "accelerometer_m_s2[0],accelerometer_m_s2[1],accelerometer_m_s2[2],"
+    px4 += "accelerometer_integral_dt,magnetometer_ga[0],magnetometer_ga[1],magnetometer_ga[2]\n"
+    px4 += "".join(
+        f"{4000 * i},0.01,0.02,0.03,0.004,1.1,-0.4,-9.6,0.004,0.1,0.2,0.4\n" for i in range(40)
+    )
+    log = load_log(_write(tmp_path, px4, "px4.csv"))
+    np.testing.assert_array_equal(log.acc[0], [1.1, -0.4, -9.6])
+    np.testing.assert_array_equal(log.mag[0], [0.1, 0.2, 0.4])
+    np.testing.assert_array_equal(log.gyro[0], [0.01, 0.02, 0.03])
+    phone = '"Time (s)","X (µT)","Y (µT)","Z (µT)"\n'
+    phone += "".join(f"{0.01 * i},18.4,3.5,-35.5\n" for i in range(40))
+    log = load_log(_write(tmp_path, phone, "Magnetometer.csv"))
+    assert log.acc is None and log.columns["mx"] == "X (µT)"
+    np.testing.assert_array_equal(log.mag[0], [18.4, 3.5, -35.5])
+
+
+@pytest.mark.parametrize(
+    "name, canon",
+    [
+        ("field.magnetic_field.z", "mz"),
+        ("X (m/s^2)", "ax"),
+        ("Z (rad/s)", "gz"),
+        ("angularVelocityY", "gy"),
+        ("Accel X (g)", "ax"),
+        # no reading: a covariance, an orientation, an estimate, a bare axis, a mixed name
+        ("field.linear_acceleration_covariance0", None),
+        ("field.orientation.x", None),
+        ("estGravityVectorX", None),
+        ("accelerometer_integral_dt", None),
+        ("X", None),
+        ("field.gyro.x (m/s^2)", None),
+    ],
+)
+def test_names_read_word_by_word(name, canon):
+    assert canonical_name(name) == canon
+
+
+def test_unrecognised_names_get_an_example_for_the_command_sensor(tmp_path):
+    """The example maps the sensor the command asked for, leaves the rising column (time) out
+    of the axes and is quoted for the shell when a name has spaces."""
+    text = "Zeit [s],Kanal 1,Kanal 2,Kanal 3\n" + "".join(
+        f"{0.01 * i},{18 + i % 3},{3 - i % 2},{-35 + i % 5}\n" for i in range(40)
+    )
+    with pytest.raises(ValueError, match=r"--columns 't=Zeit \[s\],mx=Kanal 1,my=Kanal 2,"):
+        load_log(_write(tmp_path, text, "k.csv"), sensor="mag")

@@ -96,8 +96,56 @@ def _clean(name: str) -> str:
 
 
 def canonical_name(name: str) -> str | None:
-    """The canonical column ('t', 'ax', ..., 'temp') a header name stands for, or None."""
-    return _ALIASES.get(_clean(name))
+    """The canonical column ('t', 'ax', ..., 'temp') a header name stands for, or None.
+
+    A name in the alias table (``AccX``, ``gyro_z``, ``time_ms``) first; else a name read word
+    by word (:func:`_name_by_words`): ROS ``field.linear_acceleration.x``, PX4
+    ``accelerometer_m_s2[0]``, phyphox ``X (m/s^2)``."""
+    return _ALIASES.get(_clean(name)) or _name_by_words(name)
+
+
+# words that name a sensor in a longer column name, the unit in brackets that does, and the
+# words that may stand beside them (units, ROS's 'field', vendors' 'raw'); any other word
+# (covariance, delta, est, gravity, orientation, velocity alone) makes the name no reading
+_SENSOR_WORDS = {
+    **{w: "a" for w in ("acc", "accel", "accelerometer", "acceleration", "accelerations")},
+    **{w: "g" for w in ("gyr", "gyro", "gyroscope", "gyrometer")},
+    **{w: "m" for w in ("mag", "magn", "magnetometer", "magnetic", "compass")},
+}
+_UNIT_SENSOR = {
+    **{u: "a" for u in ("m/s^2", "m/s2", "m/s²", "ms^-2", "m s^-2", "g")},
+    **{u: "g" for u in ("rad/s", "deg/s", "dps", "°/s", "rad s^-1")},
+    **{u: "m" for u in ("ut", "µt", "μt", "nt", "mt", "gauss", "ga")},
+}
+_FILLER_WORDS = {
+    "field", "linear", "data", "raw", "scaled", "imu", "sensor", "value", "values", "reading",
+    "vector", "m", "s", "s2", "ms2", "mps2", "rad", "rads", "deg", "degs", "dps", "ga",
+    "gauss", "ut", "nt", "mt",
+}  # fmt: skip
+
+
+def _name_by_words(name: str) -> str | None:
+    """'field.angular_velocity.x' -> 'gx', 'accelerometer_m_s2[0]' -> 'ax', 'X (µT)' -> 'mx':
+    one sensor (named by a word, or by the unit in brackets), one axis (a last word x, y or z,
+    or an index [0]-[2]) and no word beside them but units and fillers."""
+    low = name.strip().lower()
+    index = re.search(r"\[\s*([012])\s*\]\s*$", low)
+    units = [u.strip() for u in re.findall(r"\(([^)]*)\)", low)]
+    bare = re.sub(r"[\[\(].*?[\]\)]", " ", name.strip())
+    words = [
+        w.lower() for w in re.findall(r"[A-Z]?[a-z]+[0-9]*|[A-Z]+[0-9]*(?![a-z])|[0-9]+\w*", bare)
+    ]
+    axis = "xyz"[int(index.group(1))] if index else None
+    if axis is None and words and words[-1] in ("x", "y", "z"):
+        axis = words.pop()
+    if "angular" in words and "velocity" in words:  # ROS sensor_msgs/Imu's angular_velocity
+        words = [w for w in words if w not in ("angular", "velocity")] + ["gyro"]
+    sensors = {_SENSOR_WORDS[w] for w in words if w in _SENSOR_WORDS}
+    sensors |= {_UNIT_SENSOR[u] for u in units if u in _UNIT_SENSOR}
+    others = [w for w in words if w not in _SENSOR_WORDS and w not in _FILLER_WORDS]
+    if axis is None or len(sensors) != 1 or others:
+        return None
+    return sensors.pop() + axis
 
 
 @dataclass
@@ -1121,8 +1169,8 @@ def _assemble(
                 )
             raise ValueError(
                 f"{path} has no header and {width} columns ({_describe_columns(data)}); say "
-                f"what they are with --columns, e.g. --columns {_example(width, data)} ('_' "
-                "skips a column; t for a time column, else give --sample-rate)"
+                f"what they are with --columns, e.g. --columns {_example(width, data, sensor)} "
+                "('_' skips a column; t for a time column, else give --sample-rate)"
             )
         cols, why = guess
         source = {c: i for i, c in enumerate(cols)}
@@ -1178,9 +1226,9 @@ def _assemble(
     acc, gyro, mag = triple("a"), triple("g"), triple("m")
     if acc is None and mag is None and gyro is None:
         if header is not None:
-            eg = ",".join(f"{c}={h}" for c, h in zip(("ax", "ay", "az"), header, strict=False))
+            eg = _named_example(header, data, sensor)
         else:
-            eg = _example(width)
+            eg = _example(width, data, sensor)
         raise ValueError(
             f"{path}: no sensor columns recognised in {header if header is not None else names}; "
             f"map them with --columns, e.g. --columns {eg}"
@@ -1291,9 +1339,10 @@ def _describe_columns(data: np.ndarray) -> str:
     return "columns " + ", ".join(parts)
 
 
-def _example(width: int, data: np.ndarray | None = None) -> str:
+def _example(width: int, data: np.ndarray | None = None, sensor: str | None = None) -> str:
     """A positional --columns example with `width` entries: t at the first column that only
-    rises (none: no t), then ax, ay, az at the first three others."""
+    rises (none: no t), then the sensor's x, y, z (ax, ay, az unless ``sensor`` says) at the
+    first three others."""
     names = ["_"] * max(width, 3)
     rising = [] if data is None else [j for j in range(width) if _rising(data[:, j])]
     if data is None and width >= 4:
@@ -1301,6 +1350,23 @@ def _example(width: int, data: np.ndarray | None = None) -> str:
     if rising:
         names[rising[0]] = "t"
     free = [j for j in range(len(names)) if names[j] == "_"]
-    for name, j in zip(("ax", "ay", "az"), free, strict=False):
-        names[j] = name
+    for axis, j in zip("xyz", free, strict=False):
+        names[j] = _SENSORS.get(sensor, "a") + axis
     return ",".join(names)
+
+
+def _named_example(header: list[str], data: np.ndarray, sensor: str | None) -> str:
+    """A --columns example for a header whose names were not recognised: t for a time-like
+    name (else the first column that only rises), the sensor's x, y, z for the first three
+    other columns that do not only rise, quoted for the shell when a name needs it."""
+    t = next((j for j, h in enumerate(header) if canonical_name(h) == "t"), None)
+    rising = [j for j in range(len(header)) if _rising(data[:, j])]
+    if len(rising) == len(header):  # every column rises: that says nothing of time
+        rising = []
+    if t is None and rising:
+        t = rising[0]
+    free = [j for j in range(len(header)) if j != t and j not in rising]
+    pairs = [("t", t)] if t is not None else []
+    pairs += [(_SENSORS.get(sensor, "a") + a, j) for a, j in zip("xyz", free, strict=False)]
+    text = ",".join(f"{c}={header[j]}" for c, j in pairs)
+    return f"'{text}'" if re.search(r"[^\w,=.\-\[\]]", text) else text
