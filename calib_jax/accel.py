@@ -324,6 +324,7 @@ def check_poses(
             f"least {n_free} poses spread over the sphere (paper 1 uses 48)",
             n_distinct,
             model,
+            samples_tried=obs.use == "samples" or obs.report.kind == "pose_table",
         )
 
     return c_s, r_s
@@ -357,6 +358,7 @@ def _check_poses_for(
                 "the six-parameter model needs",
                 exc.n_distinct,
                 "auto",
+                exc.samples_tried,
             ) from None
         notes.append(
             f"model accel6 (gains and biases; the cross terms held at zero): the log holds "
@@ -477,7 +479,9 @@ def calibrate_accel(
     units = _resolve_units(units, report.n_intervals, static_norm, fit_norm)
     g = _reference_magnitude(g, units, static_norm, output_units)
     out_units = output_units or ("g" if units == "counts" else units)
-    warn += _coverage_warnings(pts, c_s, n_free, _nominal(pts, units, g)[0])
+    warn += _coverage_warnings(
+        pts, c_s, n_free, _nominal(pts, units, g)[0], pose_table=report.kind == "pose_table"
+    )
 
     # normalise (centre and radius of the points' sphere) and fit
     k = r_s
@@ -594,7 +598,11 @@ counts as hardly tilted (0.58 for poses all round; BROAD trial 05's x axis: 0.15
 
 
 def _coverage_warnings(
-    pts: np.ndarray, c_s: np.ndarray, n_free: int, nominal: np.ndarray | None = None
+    pts: np.ndarray,
+    c_s: np.ndarray,
+    n_free: int,
+    nominal: np.ndarray | None = None,
+    pose_table: bool = False,
 ) -> list[str]:
     """What the poses' spread leaves poorly determined (a ValueError when they lie in one
     plane): one hemisphere or a narrower cap only, or hardly more fit points than parameters.
@@ -648,8 +656,12 @@ def _coverage_warnings(
                 if len(pts) <= n_free
                 else "almost no redundancy, so the standard errors and the residual say little"
             )
-            + "; fit every static sample (--use samples, use='samples') for errors from their "
-            "scatter, or record more poses"
+            + (
+                "; record more poses (a pose table has no samples to fit instead)"
+                if pose_table
+                else "; fit every static sample (--use samples, use='samples') for errors from "
+                "their scatter, or record more poses"
+            )
         )
     return warn
 
@@ -692,11 +704,13 @@ def interval_errors(
     """RMS over static intervals of (|mean corrected a| - g)/g, and its white-noise floor.
 
     The floor is the same RMS expected from within-interval scatter alone: for each interval
-    the standard error of the mean of the corrected norm, std(|a|)/sqrt(n)/g.
+    the standard error of the mean of the corrected norm, std(|a|)/sqrt(n)/g. Rows that are
+    not finite (another packet type's rows, blank cells) are left out, as the fit leaves them.
     """
     errs, floors = [], []
     for iv in report.intervals:
         a = apply_params(params, x[iv.start : iv.stop])
+        a = a[np.isfinite(a).all(axis=1)]
         nrm = np.linalg.norm(a, axis=1)
         errs.append(np.linalg.norm(a.mean(axis=0)) / g - 1.0)
         if len(nrm) > 1:  # a pose-table row is one sample: no scatter to measure

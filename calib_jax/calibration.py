@@ -258,6 +258,11 @@ class AccelCalibration(Record):
             )
         return f"{self.rms_before / max(self.rms_after, 1e-300):.0f}x lower"
 
+    def _floor_words(self) -> str:
+        if np.isfinite(self.noise_floor):
+            return f"noise floor {self.noise_floor:.3e}"
+        return "noise floor unknown: one sample per pose, no scatter to measure it by"
+
     def report(self) -> str:
         """Table, error before and after, status and warnings, as printed by the CLI."""
         out = [
@@ -267,8 +272,7 @@ class AccelCalibration(Record):
             f"solver {self.solver}: {self.solver_message} ({self.iterations} iterations, "
             f"{self.nfev} evaluations)",
             f"RMS of (|a| - g)/g over interval means: before {self.rms_before:.3e}, "
-            f"after {self.rms_after:.3e} (noise floor {self.noise_floor:.3e}); "
-            + self._improvement(),
+            f"after {self.rms_after:.3e} ({self._floor_words()}); " + self._improvement(),
             f"condition number {self.condition:.3g}; status: {self.status}",
         ]
         if self.poorly_determined:

@@ -78,10 +78,9 @@ def accel_html(cal) -> str:
     unit_g = "1" if same else f"{cal.input_units}/{cal.output_units}"
     units = [unit_g] * 6 + [cal.input_units] * 3
     rows = [[n, cal.params[i], cal.stderr[i], units[i]] for i, n in enumerate(PARAM_NAMES)]
-    ratio = cal.rms_before / max(cal.rms_after, 1e-300)
     summary = (
         f"<div>RMS of (|a| - g)/g: {_fmt(cal.rms_before, 3)} &rarr; {_fmt(cal.rms_after, 3)} "
-        f"({ratio:.0f}x lower; noise floor {_fmt(cal.noise_floor, 3)}); {cal.n_points} "
+        f"({escape(cal._improvement())}; {escape(cal._floor_words())}); {cal.n_points} "
         f"{escape(cal.use)} from {cal.n_intervals} static intervals; {escape(cal.solver)}: "
         f"{escape(cal.solver_message)} ({cal.iterations} iterations); condition "
         f"{_fmt(cal.condition, 3)}</div>"

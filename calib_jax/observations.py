@@ -215,14 +215,17 @@ class TooFewPoses(ValueError):
     ``str()`` gives the finding and advice in Python keywords and the flags ``calib-jax
     accel`` and ``batch`` share; :meth:`advice` words it for a command with other options."""
 
-    def __init__(self, finding: str, n_distinct: int, model: str):
+    def __init__(self, finding: str, n_distinct: int, model: str, samples_tried: bool = False):
         self.finding, self.n_distinct, self.model = finding, n_distinct, model
+        self.samples_tried = samples_tried
+        """The fit already used every quasi-static sample, or the log is a pose table (one
+        sample a pose): fitting samples is no advice to give."""
         super().__init__(f"{finding}. {self.advice({'--use', '--model'})}")
 
     def advice(self, options) -> str:
         """What to do, naming only the flags in ``options`` (a command's option strings)."""
         samples, six = "", ""
-        if "--use" in options:
+        if "--use" in options and not self.samples_tried:
             samples = (
                 "; if the log does hold more orientations than were found (slow tilting with "
                 "no still poses), fit its quasi-static samples: --use samples --window 10 "

@@ -324,3 +324,36 @@ def test_another_sensors_log_is_refused_by_every_accelerometer_path(tmp_path):
     assert entry["status"] == "load_error" and "magnetometer in gauss" in entry["message"]
     # declared counts (any scale) is the way to fit it anyway
     assert cj.calibrate_accel(log.raw, units="counts", **DET).status == "ok"
+
+
+def test_rows_of_another_packet_leave_the_error_after_finite():
+    """AirbrakesV2's MicroStrain CX5 log interleaves estimate rows whose accelerometer cells
+    are blank: the fit dropped them, the 'after' error did not, and `calib-jax accel` printed
+    'after nan (noise floor nan); nanx lower' with status ok. Every second row blanked here:
+    the error after and its floor are finite and those of the same samples without the blank
+    rows (the intervals hold the same samples; the RMS is over their means, to round-off)."""
+    log = sim(7, FACES)
+    raw = np.full((2 * len(log.raw), 3), np.nan)
+    raw[::2] = log.raw
+    # the detector runs on the valid rows alone, at their own rate (half of 200 Hz)
+    gappy = cj.calibrate_accel(raw, model="accel6", **{**DET, "sample_rate": 200.0})
+    clean = cj.calibrate_accel(log.raw, model="accel6", **DET)
+    assert np.isfinite(gappy.rms_after) and np.isfinite(gappy.noise_floor)
+    assert "nan" not in gappy.report()
+    # same poses, so the same error to the accuracy of slightly different interval edges
+    assert gappy.rms_after == pytest.approx(clean.rms_after, rel=0.3)
+
+
+def test_pose_advice_is_not_the_setting_already_used():
+    """The too-few-poses refusal advised `--use samples --window 10 --threshold-factor 20` to
+    a user who had just run exactly that (xioTechnologies/Fusion's hand-held log), and
+    `--use samples` to a pose table, which has one sample a pose."""
+    tilted = random_directions(40, 3)
+    tilted = tilted[tilted[:, 2] > 0.5][:8]
+    with pytest.raises(cj.TooFewPoses) as means:
+        cj.calibrate_accel(sim(6, tilted).raw, **DET)
+    assert "--use samples" in str(means.value)
+    with pytest.raises(cj.TooFewPoses) as samples:
+        cj.calibrate_accel(sim(6, tilted).raw, use="samples", **DET)
+    assert "--use samples" not in str(samples.value)
+    assert "Record more orientations" in str(samples.value)
