@@ -131,7 +131,7 @@ class _OutputError(ValueError):
 def load_input(
     path: str,
     *,
-    columns: str | None = None,
+    columns: str | dict[str, str] | None = None,
     sample_rate: float | None = None,
     sensor: str | None = None,
 ):
@@ -355,7 +355,17 @@ def run_batch(args: argparse.Namespace) -> int:
     # after the progress line: why each file was not calibrated, without opening the JSON
     for line in not_ok:
         print(line)
+    if not (args.json or args.table):  # nothing kept on disk: show the results themselves
+        _print_batch_results(table_rows, args.sensor)
     print(f"{n_ok} of {n_all} calibrated" + (f"; wrote {args.json}" if args.json else ""))
+    headerless = sum(
+        any(n.startswith("headerless") for n in r.get("notes") or []) for r in table_rows
+    )
+    if headerless:
+        print(
+            f"note: {headerless} file(s) have no header: their columns were read as the "
+            f"{args.sensor} x, y, z (--sensor and --columns say otherwise)"
+        )
     if args.table:
         from .display import fleet_rows, write_table
 
@@ -444,6 +454,36 @@ def run_marg(args: argparse.Namespace) -> int:
     return 0 if rec.success else 1
 
 
+BATCH_ROWS_SHOWN = 20
+
+
+def _print_batch_results(results: list[dict], sensor: str) -> None:
+    """Each calibrated file's parameters, one line each (the first BATCH_ROWS_SHOWN), when the
+    batch writes neither --json nor --table."""
+    from .display import param_names
+
+    ok = [r for r in results if r["status"] == "ok"]
+    for r in ok[:BATCH_ROWS_SHOWN]:
+        names = param_names(sensor)
+        values = " ".join(f"{n} {v:.6g}" for n, v in zip(names, r["params"], strict=False))
+        print(f"{r['path']}: {values}" + (f"; rms {r['rms']:.3g}" if "rms" in r else ""))
+    more = f"{len(ok) - BATCH_ROWS_SHOWN} more results and " if len(ok) > BATCH_ROWS_SHOWN else ""
+    if ok:
+        print(f"({more}standard errors: write them with --json OUT.json or --table OUT.csv)")
+
+
+def _split_gyro_columns(spec: str | None) -> tuple[dict | None, dict | None]:
+    """--columns for ``calib-jax gyro ACC_FILE GYRO_FILE``: the gyro's entries (gx, gy, gz)
+    name columns of the gyro's file, with t where given; the rest the accelerometer's."""
+    from .io.files import parse_columns
+
+    mapping = parse_columns(spec)
+    if not mapping or not any(k.startswith("g") for k in mapping):
+        return mapping, None
+    gyro = {k: v for k, v in mapping.items() if k.startswith("g") or k == "t"}
+    return {k: v for k, v in mapping.items() if not k.startswith("g")}, gyro
+
+
 def run_gyro(args: argparse.Namespace) -> int:
     _enable_x64()
     from .gyro import calibrate_gyro
@@ -458,10 +498,13 @@ def run_gyro(args: argparse.Namespace) -> int:
                 "(calib-jax gyro ACC_FILE GYRO_FILE)"
             )
     else:
+        acc_columns, gyro_columns = _split_gyro_columns(args.columns)
         log = load_input(
-            args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="accel"
+            args.file, columns=acc_columns, sample_rate=args.sample_rate, sensor="accel"
         )
-        glog = load_input(args.gyro_file, sample_rate=args.sample_rate, sensor="gyro")
+        glog = load_input(
+            args.gyro_file, columns=gyro_columns, sample_rate=args.sample_rate, sensor="gyro"
+        )
         log = join_gyro(log, glog)
     cal = calibrate_gyro(
         log,
@@ -838,7 +881,13 @@ def _add_diagnose_parser(sub) -> None:
         "only where every acceptance test passes, and report the error before and after.",
     )
     p.add_argument("file", help="log file (CSV/TSV/text/.mat)")
-    p.add_argument("--sensor", choices=("accel", "mag", "marg"), default="accel")
+    p.add_argument(
+        "--sensor",
+        choices=("accel", "mag", "marg"),
+        help="the sensor to diagnose; default: the accelerometer, or the magnetometer of a log "
+        "that has no accelerometer columns (a headerless 3-column file is read as an "
+        "accelerometer)",
+    )
     p.add_argument("--columns", help="column mapping for headerless files, e.g. t,ax,ay,az")
     p.add_argument("--sample-rate", type=_pos_float, help="Hz, when the log has no time column")
     _add_detector_options(p, block=False)

@@ -57,6 +57,10 @@ UNIT_SCALES = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
 MAX_MOTION_S = 60.0
 """Motions longer than this are left out: a missed pose, not a rotation to integrate."""
 MIN_MOTIONS = 4
+GAP_S = 0.25
+GAP_STEPS = 10
+"""A step of the time column longer than both (seconds, and median steps) is a gap in the
+recording: the rotation during it was not sampled, so a motion across it is left out."""
 _SCAN = np.concatenate([np.logspace(-7.0, 2.0, 97), -np.logspace(-7.0, 2.0, 97)])
 """The start's first scan: common scales of 1e-7 to 100 rad/s per unit, either sign."""
 
@@ -980,7 +984,18 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     # motions between consecutive poses
     warn: list[str] = []
     windows = _motion_windows(iv)
-    too_long = [(i, s, e) for i, s, e in windows if (e - s) / rate > MAX_MOTION_S]
+    gap = max(GAP_S, GAP_STEPS / rate)
+    gapped = [(i, s, e) for i, s, e in windows if dt[s : e - 1].max(initial=0.0) > gap]
+    if gapped:
+        longest = max(dt[s : e - 1].max() for _, s, e in gapped)
+        warn.append(
+            f"{len(gapped)} of {len(windows)} motions span a gap in the time column (up to "
+            f"{longest:.3g} s without a sample, at {rate:.4g} Hz): the rotation during a gap "
+            "was not recorded, so those motions were left out (a log joined from several "
+            "recordings, or a logger that paused)"
+        )
+    windows = [w for w in windows if w not in gapped]
+    too_long = [(i, s, e) for i, s, e in windows if dt[s : e - 1].sum() > MAX_MOTION_S]
     if too_long:
         notes.append(
             f"{len(too_long)} motions longer than {MAX_MOTION_S:g} s left out (a pose the "
@@ -1001,6 +1016,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             f"{len(windows)} usable motions between {len(iv)} static poses: the gyro fit needs "
             f"at least {MIN_MOTIONS} rotations from one still pose to the next, about all "
             "three axes; record more poses with turns between them"
+            + "".join(f" ({w})" for w in warn if "gap in the time column" in w)
         )
 
     if temp is not None:

@@ -339,20 +339,29 @@ def _barely_turned(xv: np.ndarray, spread: float) -> bool:
     return spread <= BARELY_TURNED * noise
 
 
-def _check_not_flat(xn: np.ndarray) -> None:
-    """A ValueError when the normalised samples' directions lie in one plane."""
+def _check_not_flat(xn: np.ndarray, xv: np.ndarray, mean: np.ndarray, s: float) -> None:
+    """A ValueError when the normalised samples' directions lie in one plane (``xv``, their
+    mean and spread ``s``: the samples as read, to tell a sensor that hardly moved)."""
     evals, evecs = np.linalg.eigh(np.cov(xn[:: max(1, len(xn) // 100_000)].T))
-    if evals[0] < FLAT_POINTS * evals[2]:
-        raise ValueError(_one_plane(evecs[:, 0]))
-    if len(xn) > MOMENT_FORM_ABOVE:
-        cs = np.asarray(sphere_fit_moments(jnp.asarray(moments_of(xn)))[0])
-    else:
-        cs, _ = sphere_fit_points(xn)
-    dirs = xn - cs
-    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)  # in place
-    _, min_eig, unseen = sphere_coverage(dirs)
-    if min_eig < FLAT:
-        raise ValueError(_one_plane(unseen))
+    normal = evecs[:, 0] if evals[0] < FLAT_POINTS * evals[2] else None
+    if normal is None:
+        if len(xn) > MOMENT_FORM_ABOVE:
+            cs = np.asarray(sphere_fit_moments(jnp.asarray(moments_of(xn)))[0])
+        else:
+            cs, _ = sphere_fit_points(xn)
+        dirs = xn - cs
+        dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)  # in place
+        _, min_eig, unseen = sphere_coverage(dirs)
+        normal = unseen if min_eig < FLAT else None
+    if normal is None:
+        return
+    if np.linalg.norm(mean) > 3 * s and _barely_turned(xv, s):
+        raise ValueError(
+            f"the field barely changes in the sensor frame: the samples spread by {s:.3g} "
+            f"(RMS) about {_vec(mean)}, within {BARELY_TURNED:g}x of their sample-to-sample "
+            "noise: the sensor was hardly turned. Record a slow tumble through all orientations"
+        )
+    raise ValueError(_one_plane(normal))
 
 
 def _one_plane(normal: np.ndarray) -> str:
@@ -464,7 +473,7 @@ def calibrate_mag(
     _check_options(model, solver, field)
     xv, mean, s, warn = _screened(x)
     xn = (xv - mean) / s
-    _check_not_flat(xn)
+    _check_not_flat(xn, xv, mean, s)
     opts = tuple(sorted((solver_options or {}).items()))
     fits, chosen, selection = _fit_candidates(xn, model, solver, opts, warn)
     res, c_n, M_n = fits[chosen][:3]
@@ -489,8 +498,13 @@ def calibrate_mag(
         r_fit = float(natural_radius(jnp.asarray(M)))
         warn.append(
             f"the {chosen} ellipsoid ran away (mean radius {r_fit:.4g} against a data radius "
-            f"of {s:.4g}): the data cover too little of the sphere "
-            "for this model; use model='sphere' or record more orientations"
+            f"of {s:.4g}): the data cover too little of the sphere for "
+            + (
+                "any ellipsoid; record a slow tumble through all orientations"
+                if chosen == "sphere"
+                else "this model; fit a sphere (--model sphere, model='sphere') or record "
+                "more orientations"
+            )
         )
     status = fit_status(solver_status, bool(np.all(np.isfinite(W))) and not runaway)
     names = PARAM_NAMES[chosen]
@@ -527,15 +541,21 @@ def calibrate_mag(
     rms_after = float(100 * np.sqrt(np.mean(after**2)))
 
     if (
-        status == "poorly_determined"
-        and not rms_after <= RMS_PLAUSIBLE_PCT  # off any shell: a ball of noise
+        # off any shell (a ball of noise), or a shell that ran away to pass through the ball
+        (runaway or (status == "poorly_determined" and not rms_after <= RMS_PLAUSIBLE_PCT))
         and np.linalg.norm(mean) > 3 * s  # about a field far from zero: one field held
         and _barely_turned(xv, s)
     ):
+        warn[:] = [w for w in warn if "ran away" not in w]
         warn.append(
             f"the field barely changes in the sensor frame: the samples spread by {s:.3g} "
-            f"(RMS), within {BARELY_TURNED:g}x of their sample-to-sample noise, and lie on no "
-            f"shell (RMS radial error {rms_after:.3g} % after the fit): the sensor was hardly "
+            f"(RMS), within {BARELY_TURNED:g}x of their sample-to-sample noise, and "
+            + (
+                "the only shell through them runs away, far larger than the data"
+                if runaway
+                else f"lie on no shell (RMS radial error {rms_after:.3g} % after the fit)"
+            )
+            + ": the sensor was hardly "
             "turned and this is no calibration (the 'centre' is the field itself). Record a "
             "slow tumble through all orientations"
         )

@@ -480,15 +480,20 @@ def calibrate_marg_log(
     if method == "ellipsoid":
         with warnings.catch_warnings():  # a failed fit says why in its status and warnings
             warnings.simplefilter("ignore", FitStatusWarning)
-            acal = calibrate_mag(
-                log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
-            )
-        if accel == "auto" and not acal.success:
+            try:
+                acal = calibrate_mag(
+                    log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
+                )
+                why = "; ".join(acal.warnings) or acal.solver_message
+            except ValueError as exc:  # gravity in one plane or direction: no ellipsoid
+                if accel != "auto":
+                    raise
+                acal, why = None, str(exc).replace("field directions", "gravity directions")
+        if accel == "auto" and (acal is None or not acal.success):
             # a failed ellipsoid (too little of the sphere covered) would spoil the rotation
-            why = "; ".join(acal.warnings) or acal.solver_message
             warn.append(
-                f"accelerometer: its ellipsoid fit is '{acal.status}' ({why}); the "
-                "accelerometer is used as given"
+                f"accelerometer: its ellipsoid fit is '{acal.status if acal else 'failed'}' "
+                f"({why}); the accelerometer is used as given"
             )
             acal, method = None, "none"
     with warnings.catch_warnings():  # its status and warnings are in the record's mag block

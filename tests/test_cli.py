@@ -22,6 +22,7 @@ from calib_jax import cli
 from calib_jax.cli import demo_log_path, main
 from calib_jax.datasets import mag_demo_log_path
 from calib_jax.marg import MARGRecord
+from calib_jax.models.layout import PARAM_NAMES
 
 from .conftest import shared_file
 
@@ -610,3 +611,74 @@ def test_marg_reads_a_headerless_six_column_file_as_accel_then_mag(tmp_path, cap
     code = main(["marg", str(path), "--accel", "none"])
     out, err = capsys.readouterr()
     assert "read as ax ay az mx my mz" in out + err and code in (0, 1), err
+
+
+def test_batch_without_outputs_prints_each_result(tmp_path, capsys):
+    """`calib-jax batch DIR` with neither --json nor --table printed '3 of 3 calibrated' and
+    threw the parameters away (calibraxis' pose tables). It now prints each file's parameters
+    (the first BATCH_ROWS_SHOWN) and says how to keep the standard errors; a headerless
+    file's sensor is stated (a magnetometer dump was calibrated as an accelerometer, ok)."""
+    d = tmp_path / "logs"
+    d.mkdir()
+    raw = cj.load_log(demo_log_path())
+    np.savetxt(d / "a.csv", raw.acc, delimiter=",", header="ax,ay,az", comments="")
+    np.savetxt(d / "b.csv", raw.acc[::-1], delimiter=",")  # headerless, time reversed
+    assert main(["batch", str(d), "--model", "accel9", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    single = cj.calibrate_accel(raw.acc, model="accel9")
+    line = next(ln for ln in out.splitlines() if ln.startswith(str(d / "a.csv")))
+    # printed to six significant figures; the batch and single fits agree far closer
+    words = line.split(": ", 1)[1].split("; ")[0].split()
+    printed = {k: float(v) for k, v in zip(words[::2], words[1::2], strict=True)}
+    assert list(printed) == list(PARAM_NAMES)
+    np.testing.assert_allclose(list(printed.values()), single.params, rtol=1e-5, atol=1e-7)
+    assert "--json OUT.json or --table OUT.csv" in out
+    assert "1 file(s) have no header: their columns were read as the accel x, y, z" in out
+    assert main(["batch", str(d), "--no-progress", "--json", str(tmp_path / "b.json")]) == 0
+    assert "alpha_x" not in capsys.readouterr().out  # written to the JSON instead
+
+
+def test_diagnose_chooses_the_magnetometer_of_a_log_without_an_accelerometer(
+    tmp_path, capsys, monkeypatch
+):
+    """`calib-jax diagnose FILE` on a log with only magnetometer columns said 'the log has no
+    accel columns; map them with --columns' (the fix was --sensor mag); a headerless
+    3-column file is diagnosed as an accelerometer and says so, with the flag for the other."""
+    from calib_jax.diagnose import loop
+
+    calls = []
+
+    def stub(log, **kw):  # which sensor's diagnosis the command reaches, not the diagnosis
+        calls.append(log)
+        raise ValueError("stub reached")
+
+    monkeypatch.setattr(loop, "diagnose_mag", stub)
+    monkeypatch.setattr(loop, "diagnose_accel", lambda log, **kw: stub(None))
+    mag = cj.load_log(mag_demo_log_path()).mag[:500]
+    named = tmp_path / "m.csv"
+    np.savetxt(named, mag, delimiter=",", header="mx,my,mz", comments="")
+    assert main(["diagnose", str(named)]) == 2
+    assert calls[-1] is not None and calls[-1].mag is not None  # the magnetometer's
+    bare = tmp_path / "bare.csv"
+    np.savetxt(bare, mag, delimiter=",")
+    assert main(["diagnose", str(bare)]) == 2
+    assert calls[-1] is None  # the accelerometer's
+    err = capsys.readouterr().err
+    assert "has no header: its three columns were diagnosed as an accelerometer" in err
+    assert "--sensor mag" in err
+
+
+def test_marg_names_gravity_held_in_one_direction(tmp_path, capsys):
+    """PX4's bench log (one pose): `calib-jax marg` blamed 'field directions in one plane ...
+    a turn about a single axis' - the accelerometer's ellipsoid refusal worded for a field.
+    The accelerometer is now used as given and the alignment names the cause."""
+    log = cj.load_log(mag_demo_log_path())
+    rng = np.random.default_rng(0)
+    # a vibrating bench: the scatter flat along gravity, as PX4's (0.29, 0.41, 0.16 m/s^2)
+    acc = np.array([0.05, -0.02, 0.99]) + [0.03, 0.04, 0.001] * rng.normal(size=log.mag.shape)
+    p = tmp_path / "held.csv"
+    np.savetxt(p, np.c_[acc, log.mag], delimiter=",", header="ax,ay,az,mx,my,mz", comments="")
+    assert main(["marg", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "gravity stays in about one direction" in err, err
+    assert "turn about a single axis" not in err

@@ -234,6 +234,14 @@ def test_cli_takes_the_two_xsens_files_and_apply_corrects_the_gyro(tmp_path, cap
     saved = GyroCalibration.load(out)
     np.testing.assert_allclose(here.matrix, saved.matrix, rtol=1e-12)
     np.testing.assert_allclose(here.bias, saved.bias, rtol=1e-12)
+    # --columns maps both files: the gyro's entries (and t) name the gyro file's columns (it
+    # was applied to the accelerometer's file alone, so a gyro file that needed a map could
+    # not be read at all); here the same mapping as the headerless guess, so the same C
+    cols = "t=0,ax=1,ay=2,az=3,gx=1,gy=2,gz=3"
+    mapped = tmp_path / "mapped.json"
+    argv = ["gyro", str(demo_log_path()), str(gyro_demo_log_path()), "--columns", cols]
+    assert main([*argv, "--json", str(mapped)]) == 0
+    np.testing.assert_array_equal(GyroCalibration.load(mapped).matrix, saved.matrix)
     short = tmp_path / "short_gyro.txt"
     short.write_text("\n".join(gyro_demo_log_path().read_text().splitlines()[:-10]) + "\n")
     with pytest.raises(ValueError, match="rows and .*short_gyro.txt.*one clock"):
@@ -475,3 +483,28 @@ def test_batch_of_gyro_logs_is_calibrate_gyro_per_file(sim, tmp_path, capsys):
     np.testing.assert_allclose(p.apply(jnp.asarray(sim.gyro[:20])), one.apply(sim.gyro[:20]),
                                rtol=1e-12)  # fmt: skip
     assert "C_xy" in tab.read_text().splitlines()[0]
+
+
+def test_motions_across_a_gap_in_the_time_column_are_left_out():
+    """AirbrakesV2's six one-pose files joined into one log (30-90 s between them): the gyro
+    fit integrated each 'motion' across a gap with no samples, exited 0 with C entries of
+    -1.6 and 3.1 and blamed bias drift. A motion whose time column jumps by more than
+    GAP_S (and 10 median steps) is left out and the warning says how many and why; with too
+    few motions left the refusal names the gaps."""
+    sim = simulate_gyro_log(4, n_poses=16)
+    turning = np.flatnonzero(sim.pose == -1)
+    starts = turning[np.flatnonzero(np.diff(turning, prepend=-10) > 1)]  # first of each turn
+    t = sim.t.copy()
+    for s in starts[:3]:  # a 40 s pause in the middle of three turns
+        t[s + 50 :] += 40.0
+    cal = calibrate_gyro(sim.acc, sim.gyro, t=t)
+    assert any("3 of 15 motions span a gap" in w for w in cal.warnings), cal.warnings
+    assert cal.status == "ok"
+    clean = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    # the other twelve motions give the truth within the standard errors (4 sigma, as above)
+    assert np.abs((cal.matrix - sim.gyro_matrix) / cal.stderr_matrix).max() < 4.0
+    assert clean.status == "ok"
+    for s in starts:
+        t[s + 50 :] += 40.0
+    with pytest.raises(ValueError, match="span a gap in the time column"):
+        calibrate_gyro(sim.acc, sim.gyro, t=t)

@@ -28,6 +28,15 @@ def run(args: argparse.Namespace) -> int:
         # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
         sensor="mag" if args.sensor == "marg" else args.sensor,
     )
+    guessed = ""
+    if args.sensor is None:  # the accelerometer, unless the log has only a magnetometer
+        args.sensor = "mag" if log.acc is None and log.mag is not None else "accel"
+        if any(n.startswith(("headerless 3-column", "headerless 4-column")) for n in log.notes):
+            guessed = (
+                f"note: {args.file} has no header: its three columns were diagnosed as an "
+                "accelerometer; for a magnetometer give --sensor mag"
+            )
+            print(guessed, file=sys.stderr)
     detector = detector_options(args, args.sample_rate or log.sample_rate)
     if detector and args.sensor != "accel":
         print(
@@ -80,5 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if d.verdict == "not_possible":  # like every command: input that cannot be used, exit 2
         why = d.notes[0] if d.notes else "diagnosis not possible"
         print(f"error: {args.file}: {why}", file=sys.stderr)
+        if guessed:
+            print(guessed, file=sys.stderr)
         return 2
     return 0
