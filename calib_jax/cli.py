@@ -134,12 +134,14 @@ def load_input(
     columns: str | dict[str, str] | None = None,
     sample_rate: float | None = None,
     sensor: str | None = None,
+    instance: int | None = None,
 ):
     """:func:`calib_jax.io.load_log` for the CLI: every way a file can fail to be a log becomes
     a ValueError naming the file and the cause (exit 2), never a traceback.
 
     ``sensor`` ("accel" or "mag") tells the loader which sensor a headerless 3-column file
-    holds; it is passed only when the loader accepts it.
+    holds; it is passed only when the loader accepts it. ``instance``: which sensor to read of
+    a log that interleaves several (--instance).
     """
     from .io import load_log
 
@@ -151,6 +153,8 @@ def load_input(
     kw = {}
     if sensor is not None and "sensor" in inspect.signature(load_log).parameters:
         kw["sensor"] = sensor
+    if instance is not None:
+        kw["instance"] = instance
     try:
         log = load_log(path, columns=columns, sample_rate=sample_rate, **kw)
     except UnicodeError as exc:
@@ -229,7 +233,13 @@ def run_accel(args: argparse.Namespace) -> int:
     from .accel import calibrate_accel
 
     # calibrate_accel raises ValueError (exit 2 in main) when the log has no accelerometer
-    log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="accel")
+    log = load_input(
+        args.file,
+        columns=args.columns,
+        sample_rate=args.sample_rate,
+        sensor="accel",
+        instance=args.instance,
+    )
     cal = calibrate_accel(
         log,
         g=args.g,
@@ -254,7 +264,11 @@ def run_mag(args: argparse.Namespace) -> int:
     from .mag import calibrate_mag
 
     log = load_input(
-        args.file, columns=args.columns, sample_rate=args.sample_rate, sensor=args.sensor
+        args.file,
+        columns=args.columns,
+        sample_rate=args.sample_rate,
+        sensor=args.sensor,
+        instance=args.instance,
     )
     cal = calibrate_mag(
         log,
@@ -428,7 +442,13 @@ def run_marg(args: argparse.Namespace) -> int:
 
     # sensor="mag": a headerless 6-column file is accelerometer then magnetometer, as calib-jax
     # mag reads it (it was read as accelerometer + gyro, and marg then asked for mx, my, mz)
-    log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate, sensor="mag")
+    log = load_input(
+        args.file,
+        columns=args.columns,
+        sample_rate=args.sample_rate,
+        sensor="mag",
+        instance=args.instance,
+    )
     if args.accel in ("ellipsoid", "none") and (
         detector_options(args, log.sample_rate) or args.block is not None
     ):
@@ -490,7 +510,12 @@ def run_gyro(args: argparse.Namespace) -> int:
     from .io.files import join_gyro
 
     if args.gyro_file is None:
-        log = load_input(args.file, columns=args.columns, sample_rate=args.sample_rate)
+        log = load_input(
+            args.file,
+            columns=args.columns,
+            sample_rate=args.sample_rate,
+            instance=args.instance,
+        )
         if log.gyro is None:
             raise ValueError(
                 f"{args.file}: the log has no gyro columns (gx, gy, gz): map them with "
@@ -499,12 +524,9 @@ def run_gyro(args: argparse.Namespace) -> int:
             )
     else:
         acc_columns, gyro_columns = _split_gyro_columns(args.columns)
-        log = load_input(
-            args.file, columns=acc_columns, sample_rate=args.sample_rate, sensor="accel"
-        )
-        glog = load_input(
-            args.gyro_file, columns=gyro_columns, sample_rate=args.sample_rate, sensor="gyro"
-        )
+        kw = dict(sample_rate=args.sample_rate, instance=args.instance)
+        log = load_input(args.file, columns=acc_columns, sensor="accel", **kw)
+        glog = load_input(args.gyro_file, columns=gyro_columns, sensor="gyro", **kw)
         log = join_gyro(log, glog)
     cal = calibrate_gyro(
         log,
@@ -820,10 +842,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap = sub.add_parser(
         "apply",
         help="apply a saved calibration to a log (streamed) and write the corrected CSV",
-        description="Correct the accelerometer and magnetometer columns of LOG with the "
-        "calibration in CAL (calib_jax's accel, mag or marg JSON, or an imu_tk, imucal or "
-        "imu_calib file) and write t, the corrected columns and the others unchanged as CSV. "
-        "A plain text log is streamed in chunks (memory does not grow with its length).",
+        description="Correct the accelerometer, gyro and magnetometer columns of LOG with the "
+        "calibration in CAL (calib_jax's accel, mag, gyro or marg JSON, or an imu_tk, imucal or "
+        "imu_calib file) and write CSV: t, each sensor's x, y, z (corrected where CAL has its "
+        "calibration, else as read) and the temperature. Other columns (labels, a vendor's "
+        "extra fields) are not copied. A plain text log is streamed in chunks (memory does not "
+        "grow with its length).",
     )
     ap.add_argument("calibration", metavar="CAL", help="the saved calibration")
     ap.add_argument("file", metavar="LOG", help="the log to correct")
@@ -861,6 +885,14 @@ def build_parser() -> argparse.ArgumentParser:
     ex.set_defaults(func=run_export, output_files=(("out", "--out"),))
 
     _add_diagnose_parser(sub)
+    for name in ("accel", "mag", "marg", "gyro", "diagnose"):  # the one-log commands
+        sub.choices[name].add_argument(
+            "--instance",
+            type=int,
+            default=None,
+            help="a log that interleaves several sensors' rows, told apart by an instance "
+            "column (ArduPilot's I): the one to read (default: the first row's)",
+        )
     for command in sub.choices.values():  # what each command can be told to change
         command.set_defaults(option_strings=frozenset(_option_strings(command)))
     return p

@@ -850,3 +850,30 @@ def test_unrecognised_names_get_an_example_for_the_command_sensor(tmp_path):
     )
     with pytest.raises(ValueError, match=r"--columns 't=Zeit \[s\],mx=Kanal 1,my=Kanal 2,"):
         load_log(_write(tmp_path, text, "k.csv"), sensor="mag")
+
+
+def test_interleaved_sensor_instances_are_read_one_at_a_time(tmp_path):
+    """ArduPilot's IMU and MAG messages (mavlogdump --format csv) interleave every IMU's rows,
+    told apart by the instance column I: read as one sensor, two IMUs gave 'the time column
+    must increase' (each time stamp twice) and one pose of their readings mixed. The first
+    row's instance is read, with a note naming the others; instance= picks another."""
+    head = "timestamp,TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,T\n"
+    rows = "".join(
+        f"{0.04 * k:.2f},{40000 * k},{i},0.01,0.02,0.03,{0.6 - i},0.9,-9.8,{37 - 9 * i}\n"
+        for k in range(20)
+        for i in (0, 1)
+    )
+    p = _write(tmp_path, head + rows, "IMU.csv")
+    first = load_log(p)
+    assert len(first) == 20 and np.all(first.acc[:, 0] == 0.6)
+    assert np.all(np.diff(first.t) > 0)
+    assert any(
+        "column 'I' interleaves 2 sensors' rows: read those of I = 0" in n for n in first.notes
+    )
+    second = load_log(p, instance=1)
+    assert len(second) == 20 and np.all(second.acc[:, 0] == -0.4)
+    with pytest.raises(ValueError, match="no rows of instance 4: column 'I' holds 0, 1"):
+        load_log(p, instance=4)
+    # a column named I that does not take turns (a current, a counter) is read as it is
+    plain = head + "".join(f"{0.04 * k:.2f},{40000 * k},{k},0,0,0,0,0,-9.8,37\n" for k in range(20))
+    assert len(load_log(_write(tmp_path, plain, "plain.csv"))) == 20

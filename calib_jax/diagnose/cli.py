@@ -25,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
         args.file,
         columns=args.columns,
         sample_rate=args.sample_rate,
+        instance=args.instance,
         # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
         sensor="mag" if args.sensor == "marg" else args.sensor,
     )

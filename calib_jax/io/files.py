@@ -1002,6 +1002,7 @@ def load_log(
     sample_rate: float | None = None,
     sensor: str | None = None,
     max_rows: int | None = None,
+    instance: int | None = None,
 ) -> SensorLog:
     """Load a sensor log (see the module docstring for the formats).
 
@@ -1019,6 +1020,10 @@ def load_log(
     max_rows : int, optional
         Read only the first ``max_rows`` data rows of a text file (MAT files are read whole);
         :func:`iter_rows` streams the rest of a plain text file in bounded memory.
+    instance : int, optional
+        For a file whose rows interleave several sensors, told apart by an instance column
+        (ArduPilot's ``I``; :data:`INSTANCE_NAMES`): the instance to read. Default: the one
+        in the first row, with a note naming the others.
 
     Raises
     ------
@@ -1052,7 +1057,7 @@ def load_log(
         # a big file that is not compressed and not a MAT file: read its ends only, numpy's
         # parser reads the rest from disk
         tab = _read_text(path, raw[0], True, notes, tail_raw=raw[1], max_rows=max_rows)
-        return _assemble(path, tab, mapping, sensor, sample_rate, notes)
+        return _assemble(path, tab, mapping, sensor, sample_rate, notes, instance)
     raw = raw[0] if not big else _read_bytes(path)
     if not raw:
         raise ValueError(f"{path} is empty (0 bytes): nothing to calibrate")
@@ -1064,7 +1069,7 @@ def load_log(
         tab = _read_mat(raw, path, notes)
     else:
         tab = _read_text(path, raw, not compressed, notes, max_rows=max_rows)
-    return _assemble(path, tab, mapping, sensor, sample_rate, notes)
+    return _assemble(path, tab, mapping, sensor, sample_rate, notes, instance)
 
 
 def as_log(data, sensor: str | None = None):
@@ -1098,6 +1103,7 @@ def _assemble(
     sensor: str | None,
     sample_rate: float | None,
     notes: list[str],
+    instance: int | None = None,
 ) -> SensorLog:
     """Columns to sensors: the header, --columns or the headerless guess; notes on the cells."""
     header, data, preamble = tab.header, tab.data, tab.preamble
@@ -1179,6 +1185,9 @@ def _assemble(
             "to override"
         )
 
+    data, layout = _one_instance(path, header, data, instance, notes), tab.layout
+    if len(data) < len(tab.data):
+        layout = None  # a streamed reader would read every instance's rows
     # cells the caller will have to drop, counted per column it uses. A finite value beyond
     # 1e150 is no reading (a corrupt cell: its square overflows any sum); it is read as +-inf
     # so that it is dropped with the other non-finite cells instead of wrecking a fit.
@@ -1262,10 +1271,49 @@ def _assemble(
         path=str(path),
         columns={k: names[v] for k, v in source.items()},
         notes=notes,
-        layout=None
-        if tab.layout is None
-        else {**tab.layout, "source": source, "time_scale": time_scale},
+        layout=None if layout is None else {**layout, "source": source, "time_scale": time_scale},
     )
+
+
+INSTANCE_NAMES = ("i", "instance", "inst", "sensorinstance", "imuinstance", "sensorid", "imuid")
+"""Header names (cleaned) of a column that tells interleaved sensors apart (ArduPilot's IMU and
+MAG messages carry ``I``: 0, 1, 2 for the first, second, third IMU)."""
+
+
+def _one_instance(
+    path: Path, header: list[str] | None, data: np.ndarray, instance: int | None, notes: list
+) -> np.ndarray:
+    """The rows of one sensor instance, when an instance column (:data:`INSTANCE_NAMES`) holds
+    2-8 small whole numbers that take turns row by row; else ``data`` as it is. Two IMUs read
+    as one gave 'the time column must increase' and, for the accelerometer, one pose of their
+    average."""
+    j = next((j for j, h in enumerate(header or []) if _clean(h) in INSTANCE_NAMES), None)
+    if j is None:
+        return data
+    col = data[:, j]
+    values = np.unique(col[np.isfinite(col)])
+    whole = values.size and np.all(values == np.round(values)) and values.min() >= 0
+    if not (whole and 2 <= values.size <= 8) or np.mean(np.diff(col) != 0) < 0.25:
+        if instance is not None:
+            raise ValueError(
+                f"{path}: instance {instance} asked for, but its column {header[j]!r} does not "
+                "tell interleaved sensors apart (it needs 2-8 whole numbers taking turns)"
+            )
+        return data
+    chosen = int(col[0]) if instance is None else int(instance)
+    if chosen not in values:
+        raise ValueError(
+            f"{path}: no rows of instance {chosen}: column {header[j]!r} holds "
+            + ", ".join(f"{v:g}" for v in values)
+        )
+    keep = col == chosen
+    others = ", ".join(f"{v:g}" for v in values if v != chosen)
+    notes.append(
+        f"column {header[j]!r} interleaves {values.size} sensors' rows: read those of "
+        f"{header[j]} = {chosen} ({int(keep.sum())} of {len(col)} rows); the others ({others}) "
+        "with --instance (instance= in Python)"
+    )
+    return data[keep]
 
 
 def _rate_from_steps(dt: np.ndarray, notes: list[str]) -> float | None:
