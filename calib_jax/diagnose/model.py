@@ -94,6 +94,15 @@ def radius(theta, free):
     return jnp.cbrt(det3(base_alpha(theta, free)))
 
 
+def _row(theta, x, tau, temp, free):
+    """One data row of the residual: r (|y| - 1), r = det(alpha)^(1/3)."""
+    y = calibrated(theta, free, x, tau, temp)
+    return radius(theta, free) * (jnp.sqrt(jnp.sum(y * y)) - 1.0)
+
+
+_ROWS = (None, 0, 0, 0, None)  # theta and the mask shared, one row of data each
+
+
 def residual(theta, data):
     """Data rows r (|y_i| - 1) with r = det(alpha)^(1/3), then 30 pinning rows.
 
@@ -103,10 +112,18 @@ def residual(theta, data):
     0.03 % that way; the same runaway calib_jax.models.mag guards against).
     """
     x, tau, temp, w, free = data
-    y = jax.vmap(calibrated, in_axes=(None, None, 0, 0, 0))(theta, free, x, tau, temp)
-    e = radius(theta, free) * (jnp.sqrt(jnp.sum(y * y, axis=1)) - 1.0)
-    pin = jnp.where(free, 0.0, theta)
-    return jnp.concatenate([e, pin])
+    e = jax.vmap(_row, in_axes=_ROWS)(theta, x, tau, temp, free)
+    return jnp.concatenate([e, jnp.where(free, 0.0, theta)])
+
+
+def jacobian(theta, data):
+    """The exact Jacobian of :func:`residual`: one reverse pass per data row (a vmap of its
+    gradient), then the pinning rows' constant diagonal. ``jax.jacfwd`` pushes 30 tangents
+    through every row instead: 17 ms against 2.1 ms at 4,096 rows (equal to 4e-16), and the
+    Jacobian is most of a diagnosis fit's time (issue 17)."""
+    x, tau, temp, w, free = data
+    rows = jax.vmap(jax.grad(_row), in_axes=_ROWS)(theta, x, tau, temp, free)
+    return jnp.concatenate([rows, jnp.diag(jnp.where(free, 0.0, 1.0).astype(rows.dtype))])
 
 
 def _fit_one(theta0, x, tau, temp, w, free, max_iter):
@@ -120,13 +137,14 @@ def _fit_one(theta0, x, tau, temp, w, free, max_iter):
         data,
         weights=weights,
         update_type=1,
+        jacobian=jacobian,
         dof=dof,
         max_iter=max_iter,
         covariance_method="cholesky",
     )
     r = radius(res.params, free)
     e = residual(res.params, data)[:m] / r  # |y| - 1, the relative error reported
-    J = jax.jacfwd(residual)(res.params, data)[:m] / r
+    J = jacobian(res.params, data)[:m] / r
     return res.params, res.stderr, res.status, e, J
 
 

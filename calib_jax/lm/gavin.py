@@ -148,7 +148,7 @@ def lm_solve(
     weights: jax.Array | None = None,
     update_type: UpdateType = 1,
     rho_form: Literal["current", "paper"] = "current",
-    jacobian: JacobianMode = "exact",
+    jacobian: JacobianMode | Callable[[jax.Array, Any], jax.Array] = "exact",
     fd_scheme: Literal["central", "forward"] = "central",
     fd_delta: float = 1e-6,
     eps1: float = DEFAULTS.eps1,
@@ -184,9 +184,13 @@ def lm_solve(
         Marquardt, quadratic line-search, Nielsen (LM_SPEC table). Static.
     rho_form : {"current", "paper"}
         Denominator of the acceptance ratio (see module docstring). Static.
-    jacobian : {"exact", "broyden"}
-        Autodiff Jacobian every accepted step, or paper 1's finite differences plus Broyden
-        rank-1 updates. Static.
+    jacobian : {"exact", "broyden"} or callable
+        Autodiff Jacobian every accepted step (``jax.jacfwd``), or paper 1's finite
+        differences plus Broyden rank-1 updates; or the exact Jacobian as a function
+        ``jacobian(p, args) -> (m, n)``, for a residual whose structure autodiff can use
+        better (a residual of rows, each a function of all of p: a vmap of each row's
+        ``grad`` is one reverse pass per row instead of n forward passes through every row).
+        Static.
     eps1, eps2, eps3, eps4 : float
         Gradient, parameter, reduced-chi2 and acceptance thresholds.
     max_iter, max_nfev : int
@@ -211,8 +215,11 @@ def lm_solve(
         raise ValueError(f"update_type must be 1, 2 or 3, got {update_type!r}")
     if rho_form not in ("current", "paper"):
         raise ValueError(f"rho_form must be 'current' or 'paper', got {rho_form!r}")
+    jac_fun = None
+    if callable(jacobian):
+        jac_fun, jacobian = jacobian, "exact"
     if jacobian not in ("exact", "broyden"):
-        raise ValueError(f"jacobian must be 'exact' or 'broyden', got {jacobian!r}")
+        raise ValueError(f"jacobian must be 'exact', 'broyden' or a function, got {jacobian!r}")
     if fd_scheme not in ("central", "forward"):
         raise ValueError(f"fd_scheme must be 'central' or 'forward', got {fd_scheme!r}")
     p0 = jnp.asarray(p0)
@@ -259,6 +266,7 @@ def lm_solve(
         max_nfev=10**9 if max_nfev is None else int(max_nfev),
         hist_len=max_iter if history else 1,
         history=history,
+        jac_fun=jac_fun,
     )
     final = jax.lax.while_loop(
         lambda c: c.status == _RUNNING, lambda c: _iteration(P, c), _init(P, p0, e0)
@@ -297,6 +305,8 @@ class _Problem(NamedTuple):
     max_nfev: int
     hist_len: int
     history: bool
+    jac_fun: Callable | None = None
+    """The caller's exact Jacobian ``jac_fun(p, args)``; None: ``jax.jacfwd`` of ``fun``."""
 
     @property
     def n_fd(self) -> int:
@@ -307,7 +317,7 @@ class _Problem(NamedTuple):
         return self.fun(p, self.args)
 
     def jac_exact(self, p):
-        return jax.jacfwd(self.fun)(p, self.args)
+        return (self.jac_fun or jax.jacfwd(self.fun))(p, self.args)
 
     def jac_fd(self, p):
         return finite_difference_jacobian(self.fun, p, self.args, self.fd_delta, self.fd_scheme)
