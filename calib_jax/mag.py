@@ -263,18 +263,19 @@ def _compiled_moments(solver: str, model: str, options: tuple):
     )
 
 
-def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str]]:
-    """(N, 3) float vectors, the source path and the loader's notes, from an array, a log
-    or a file."""
+def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str], str | None]:
+    """(N, 3) float vectors, the source path, the loader's notes and the unit the column
+    names state (None: not stated), from an array, a log or a file."""
     data = as_log(data, sensor)
     if not isinstance(data, SensorLog):
         x = np.asarray(data, float)
-        source, notes = None, []
+        source, notes, unit = None, [], None
     else:
         x, source, notes = data.vectors(sensor), data.path, list(data.notes)
+        unit = data.units.get(sensor)
     if x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"{sensor} data must be (samples, 3), got shape {x.shape}")
-    return x, source, notes
+    return x, source, notes, unit
 
 
 def _check_options(model: str, solver: str, field: float | None) -> None:
@@ -469,7 +470,8 @@ def calibrate_mag(
         values float64 cannot fit (beyond 1e100, or a spread below 1e-100 or 1e-9 of the
         offset).
     """
-    x, source, notes = _input_vectors(data, sensor)
+    x, source, notes, stated_unit = _input_vectors(data, sensor)
+    units = units or stated_unit  # the header's 'X (µT)' labels the report, as --units does
     _check_options(model, solver, field)
     xv, mean, s, warn = _screened(x)
     xn = (xv - mean) / s

@@ -814,11 +814,14 @@ def test_ros_px4_and_phone_export_names_read_without_flags(tmp_path):
     np.testing.assert_array_equal(log.acc[0], [1.1, -0.4, -9.6])
     np.testing.assert_array_equal(log.mag[0], [0.1, 0.2, 0.4])
     np.testing.assert_array_equal(log.gyro[0], [0.01, 0.02, 0.03])
+    # the units the names state label the reports (the magnetometer's was 'raw units')
+    assert log.units == {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
     phone = '"Time (s)","X (µT)","Y (µT)","Z (µT)"\n'
     phone += "".join(f"{0.01 * i},18.4,3.5,-35.5\n" for i in range(40))
     log = load_log(_write(tmp_path, phone, "Magnetometer.csv"))
     assert log.acc is None and log.columns["mx"] == "X (µT)"
     np.testing.assert_array_equal(log.mag[0], [18.4, 3.5, -35.5])
+    assert log.units == {"mag": "uT"}
 
 
 @pytest.mark.parametrize(

@@ -378,6 +378,12 @@ def test_the_logs_notes_are_notes_and_left_out_samples_are_warnings(tmp_path):
     assert cal.notes == list(log.notes)
     left_out = "rows with NaN or inf were left out of the fit"
     assert any(left_out in w for w in cal.warnings) and not any(left_out in n for n in cal.notes)
+    # a unit the column names state labels the record (phyphox's 'X (µT)' was 'raw units');
+    # units= still wins
+    named = tmp_path / "named.csv"
+    np.savetxt(named, x, delimiter=",", header="X (µT),Y (µT),Z (µT)", comments="")
+    assert calibrate_mag(named, model="full").units == "uT"
+    assert calibrate_mag(named, model="full", units="counts").units == "counts"
 
 
 @pytest.mark.parametrize("model", ["auto", "sphere"])

@@ -124,6 +124,32 @@ _FILLER_WORDS = {
 }  # fmt: skip
 
 
+_UNIT_LABELS = {
+    **{u: "m/s^2" for u in ("m/s^2", "m/s2", "m/s²", "ms^-2", "m s^-2", "ms2", "mps2")},
+    **{u: "rad/s" for u in ("rad/s", "rad s^-1", "rad")},
+    **{u: "deg/s" for u in ("deg/s", "dps", "°/s")},
+    **{u: "uT" for u in ("ut", "µt", "μt")},
+    **{u: "gauss" for u in ("gauss", "ga")},
+    "nt": "nT",
+    "mt": "mT",
+    "g": "g",
+}
+
+
+def unit_in_name(name: str) -> str | None:
+    """The unit a column name states, in brackets ('X (µT)', 'acc_x [m/s^2]') or as PX4's
+    last word ('accelerometer_m_s2[0]', 'magnetometer_ga[0]'); None when it states none."""
+    low = name.strip().lower()
+    for u in re.findall(r"[\(\[]([^\)\]]*)[\)\]]", low):
+        if u.strip() in _UNIT_LABELS:
+            return _UNIT_LABELS[u.strip()]
+    bare = re.sub(r"\[\s*[012]\s*\]\s*$", "", low)
+    if bare.endswith(("_m_s2", "_ms2")):
+        return "m/s^2"
+    last = re.split(r"[^a-z0-9]+", bare)[-1] if bare else ""
+    return {"ga": "gauss", "rad": "rad/s", "ut": "uT"}.get(last) if "_" in bare else None
+
+
 def _name_by_words(name: str) -> str | None:
     """'field.angular_velocity.x' -> 'gx', 'accelerometer_m_s2[0]' -> 'ax', 'X (µT)' -> 'mx':
     one sensor (named by a word, or by the unit in brackets), one axis (a last word x, y or z,
@@ -163,6 +189,9 @@ class SensorLog:
     """Canonical name -> the file's column name (or index) it came from."""
     notes: list[str] = field(default_factory=list)
     """What the loader assumed or dropped, for the report."""
+    units: dict[str, str] = field(default_factory=dict)
+    """Sensor ("accel", "gyro", "mag") -> the unit its column names state ('X (µT)',
+    PX4's 'magnetometer_ga[0]'), where all three agree; used as the report's label."""
     layout: dict | None = field(default=None, repr=False, compare=False)
     """Where the rows of a plain text file sit (encoding, first data line, delimiter, column
     indices, time unit), for :func:`iter_rows`; None for MAT and compressed files."""
@@ -1261,6 +1290,11 @@ def _assemble(
             dt = dt[np.isfinite(dt) & (dt > 0)]
             if dt.size:
                 rate = _rate_from_steps(dt, notes)
+    units = {}
+    for sensor_name, p in (("accel", "a"), ("gyro", "g"), ("mag", "m")):
+        stated = {unit_in_name(names[source[p + a]]) for a in "xyz" if p + a in source}
+        if len(stated) == 1 and None not in stated:
+            units[sensor_name] = stated.pop()
     return SensorLog(
         acc=acc,
         gyro=gyro,
@@ -1271,6 +1305,7 @@ def _assemble(
         path=str(path),
         columns={k: names[v] for k, v in source.items()},
         notes=notes,
+        units=units,
         layout=None if layout is None else {**layout, "source": source, "time_scale": time_scale},
     )
 
