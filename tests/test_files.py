@@ -832,6 +832,9 @@ def test_ros_px4_and_phone_export_names_read_without_flags(tmp_path):
         ("Z (rad/s)", "gz"),
         ("angularVelocityY", "gy"),
         ("Accel X (g)", "ax"),
+        ("w_RS_S_x [rad s^-1]", "gx"),  # EuRoC / Kalibr imu0/data.csv
+        ("a_RS_S_z [m s^-2]", "az"),
+        ("p_RS_R_x [m]", None),  # EuRoC ground truth: a position
         # no reading: a covariance, an orientation, an estimate, a bare axis, a mixed name
         ("field.linear_acceleration_covariance0", None),
         ("field.orientation.x", None),

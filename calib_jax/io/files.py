@@ -156,7 +156,7 @@ def _name_by_words(name: str) -> str | None:
     or an index [0]-[2]) and no word beside them but units and fillers."""
     low = name.strip().lower()
     index = re.search(r"\[\s*([012])\s*\]\s*$", low)
-    units = [u.strip() for u in re.findall(r"\(([^)]*)\)", low)]
+    units = [u.strip() for u in re.findall(r"[\(\[]([^\)\]]*)[\)\]]", low)]
     bare = re.sub(r"[\[\(].*?[\]\)]", " ", name.strip())
     words = [
         w.lower() for w in re.findall(r"[A-Z]?[a-z]+[0-9]*|[A-Z]+[0-9]*(?![a-z])|[0-9]+\w*", bare)
@@ -169,6 +169,8 @@ def _name_by_words(name: str) -> str | None:
     sensors = {_SENSOR_WORDS[w] for w in words if w in _SENSOR_WORDS}
     sensors |= {_UNIT_SENSOR[u] for u in units if u in _UNIT_SENSOR}
     others = [w for w in words if w not in _SENSOR_WORDS and w not in _FILLER_WORDS]
+    if any(u in _UNIT_SENSOR for u in units):  # EuRoC/Kalibr's 'a_RS_S_x [m s^-2]': frame
+        others = [w for w in others if len(w) > 2]  # letters beside a unit that names the sensor
     if axis is None or len(sensors) != 1 or others:
         return None
     return sensors.pop() + axis
