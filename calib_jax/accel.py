@@ -666,16 +666,21 @@ def _coverage_warnings(
     return warn
 
 
+def poorly_determined(se_n, model: str) -> list[str]:
+    """The free parameters whose standard error in units of g (a unit-radius fit:
+    gains and cross terms as they are, biases over the radius) exceeds POOR_STDERR; the one
+    rule of the single fit and the batch."""
+    free = np.asarray(MODELS[model])
+    bad = ~np.isfinite(se_n) | (np.asarray(se_n) > POOR_STDERR)
+    return [PARAM_NAMES[i] for i in range(9) if free[i] and bad[i]]
+
+
 def _status(solver_status, params, se_n, corr, condition, model, warn) -> tuple[str, list[str]]:
     """The record's status word and the poorly determined parameters; appends the reasons
     (collinear parameters, ill-conditioning, large standard errors) to ``warn``."""
     status = fit_status(solver_status, bool(np.all(np.isfinite(params))))
     free = np.asarray(MODELS[model])
-    poor = [
-        PARAM_NAMES[i]
-        for i in range(9)
-        if free[i] and (not np.isfinite(se_n[i]) or se_n[i] > POOR_STDERR)
-    ]
+    poor = poorly_determined(se_n, model)
     hi_corr = [
         f"{PARAM_NAMES[i]}~{PARAM_NAMES[j]} ({corr[i, j]:+.4f})"
         for i in range(9)
@@ -690,12 +695,13 @@ def _status(solver_status, params, se_n, corr, condition, model, warn) -> tuple[
     if status == "ok" and (poor or ill):
         status = "poorly_determined"
         if poor:
-            warn.append(
-                "poorly determined (std. error above 1 % of g): "
-                + ", ".join(poor)
-                + "; add poses that cover the sphere"
-            )
+            warn.append(POORLY_DETERMINED.format(", ".join(poor)))
     return status, poor
+
+
+POORLY_DETERMINED = (
+    "poorly determined (std. error above 1 % of g): {}; add poses that cover the sphere"
+)
 
 
 def interval_errors(

@@ -276,6 +276,7 @@ def fleet_rows(results, sensor: str | None = None) -> list[dict]:
         for k in (*keys, "static_intervals", "units", "g", "use"):
             if k in r:
                 row[k] = r[k]
+        row["warnings"] = "; ".join(r.get("warnings") or [])
         row["notes"] = "; ".join(r.get("notes") or [])
         rows.append(row)
     return rows

@@ -50,11 +50,17 @@ def prepare_log(
         valid, notes = screen_samples(x, "mag")
         info["notes"] = list(log.notes) + notes
         return x[valid], info
-    from .accel import check_poses
+    from .accel import MODELS, _coverage_warnings, _nominal, check_poses
 
     obs = accel_observations(x, use=use, sample_rate=log.sample_rate, **detector)
-    radius = check_poses(obs, model or "accel9", log.sample_rate)[1]
+    centre, radius = check_poses(obs, model or "accel9", log.sample_rate)
+    n_free = int(sum(MODELS[model or "accel9"]))
+    nominal = _nominal(obs.points, _units_of(obs), 1.0)[0]
     info.update(
+        # what the single fit warns of the poses' spread (one hemisphere, a cap), as it words it
+        warnings=_coverage_warnings(
+            obs.points, centre, n_free, nominal, pose_table=obs.report.kind == "pose_table"
+        ),
         notes=list(log.notes) + obs.warnings + obs.notes,
         static_intervals=obs.report.n_intervals,
         use=use,
@@ -111,8 +117,35 @@ def fit_prepared(
             r = calibrate_mag_batch(raw, mask, **options)
         entries = r.entries([str(name) for name, _, _ in fit])
     ref = {"field": options.get("field")} if sensor == "mag" else {}  # accel: each info's g
-    out += [{**e, **info, **ref} for e, (_, _, info) in zip(entries, fit, strict=True)]
+    for e, (_, _, info) in zip(entries, fit, strict=True):
+        if sensor == "accel":
+            _judge_accel(e, info, options.get("model") or "accel9")
+        out.append({**e, **info, **ref})
     return out
+
+
+def _units_of(obs) -> str:
+    from .accel import _units_from_norm
+
+    return _units_from_norm(obs.static_norm) or "counts"
+
+
+def _judge_accel(entry: dict, info: dict, model: str) -> None:
+    """The single fit's status rule on a batch entry: a fit whose standard errors exceed 1 %
+    of g is poorly determined, with the coverage warnings that say why (the batch called a
+    one-hemisphere log with a z gain of 1.51 'ok' where calib-jax accel said so)."""
+    from .accel import POORLY_DETERMINED, poorly_determined
+
+    if entry["status"] != "ok":
+        return
+    # standard errors in units of g: gains and cross terms over r / g, biases over r
+    r, g = info["fit_norm"], info["g"]
+    scale = np.concatenate([np.full(6, r / g), np.full(3, r)])
+    poor = poorly_determined(np.asarray(entry["stderr"], float) / scale, model)
+    if poor:
+        entry["status"] = "poorly_determined"
+        entry["message"] = POORLY_DETERMINED.format(", ".join(poor))
+        entry["poorly_determined"] = poor
 
 
 def _fit_chunk(

@@ -255,3 +255,25 @@ def test_a_fleet_fit_leaves_the_callers_jax_setting_alone(fleet_dir):
     assert x64 is False
     [here] = calibrate_files([path], progress=False)
     np.testing.assert_allclose(params, here["params"], rtol=1e-12)
+
+
+def test_a_one_hemisphere_log_is_poorly_determined_in_the_batch_too(tmp_path):
+    """pms67/Attitude-Estimation's hand-tilted MPU-6050 log: `calib-jax accel` said
+    poorly_determined (z gain 1.51, every pose within 73 deg of +z) and `calib-jax batch`
+    called the same parameters ok, with no warning. The batch entry now takes the single
+    fit's rule (standard errors above 1 % of g) and its coverage warnings."""
+    rng = np.random.default_rng(3)
+    dirs = rng.normal(size=(400, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs = dirs[dirs[:, 2] > np.cos(np.radians(45))][:14]  # a cap: no pose with z down
+    log = simulate_accel(random_params(3), dirs, samples_per_pose=300, transition_samples=20,
+                         noise=2e-3, rng=3)  # fmt: skip
+    path = tmp_path / "cap.csv"
+    np.savetxt(path, np.column_stack([log.t, log.raw]), delimiter=",", header="t,ax,ay,az",
+               comments="")  # fmt: skip
+    single = cj.calibrate_accel(cj.load_log(path))
+    (entry,) = calibrate_files([str(path)], progress=False)
+    assert single.status == "poorly_determined"
+    assert entry["status"] == single.status, entry
+    assert entry["poorly_determined"] == single.poorly_determined
+    assert any("hemisphere" in w or "all poses lie" in w for w in entry["warnings"])
