@@ -352,7 +352,11 @@ def _check_poses_for(
         if exc.n_distinct < 6:
             raise
         c_s, r_s = check_poses(obs, "accel6", sample_rate)
-        if not _holds_six_faces(obs.points, c_s):
+        # about the fitted centre and the nominal one: a sphere through a cap of poses puts
+        # its centre anywhere, and about it the cap showed 'each axis up and down' (a EuRoC
+        # flight, every pose within 28 deg of one direction)
+        nominal = _nominal(obs.points, _units_from_norm(obs.static_norm) or "counts", 1.0)[0]
+        if not (_holds_six_faces(obs.points, c_s) and _holds_six_faces(obs.points, nominal)):
             raise TooFewPoses(
                 f"{exc.finding}; nor do the poses hold each axis pointing up and down, which "
                 "the six-parameter model needs",

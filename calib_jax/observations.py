@@ -65,6 +65,13 @@ def saturated_axes(
     return out
 
 
+NO_GRAVITY = 0.1
+"""An accelerometer log in which no pose is found and whose median |a| is below this holds no
+gravity in any unit (g's band starts at 0.7; accel.UNIT_BANDS): a dead sensor or linear
+acceleration. Altus Metrum's TeleMega export, IMU columns near 0, was 'no static interval,
+noise level nan'. (Declared counts of any scale that do hold poses are fitted.)"""
+
+
 def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, list[str]]:
     """The usable samples of an (N, 3) array: a boolean mask (finite and not on a saturated
     axis) and a note for each kind of sample left out. Raises a ValueError when no row is
@@ -75,6 +82,13 @@ def screen_samples(x: np.ndarray, sensor: str = "accel") -> tuple[np.ndarray, li
         raise ValueError(f"no finite {what} samples: every row has NaN or inf")
     what = "accelerometer" if sensor == "accel" else "magnetometer"
     xf = x if finite.all() else x[finite]  # no copy of a clean log
+    zero = np.all(xf == 0, axis=1)
+    if zero.mean() > 0.5:  # a live sensor never reads exactly 0 on all three axes for long
+        raise ValueError(
+            f"the {what} reads exactly 0 on every axis in {int(zero.sum())} of {len(xf)} rows: "
+            "no signal (a sensor that was off or not logged, an unused field of the export, "
+            "or the wrong columns); check the column mapping (--columns)"
+        )
     # one axis constant while the others swing (the board moved): that axis is stuck. A
     # board that never moved, read coarsely, can hold every axis constant: the pose checks
     # then say "one pose", which is the cause
@@ -169,6 +183,14 @@ def accel_observations(
     valid, warnings = screen_samples(x, "accel")
     report = detect_static(x, sample_rate=sample_rate, valid=valid, **detector)
     notes = report.notes(sample_rate)
+    level = float(np.median(np.linalg.norm(x[np.isfinite(x).all(axis=1)], axis=1)))
+    if report.n_intervals == 0 and level < NO_GRAVITY:  # the cause, not the detector's miss
+        raise ValueError(
+            f"the accelerometer reads about 0 (median |a| {level:.3g}): gravity reads 1 in g, "
+            "9.8 in m/s^2 and hundreds or more in counts, so these readings hold no gravity (a "
+            "sensor that was off, gravity already removed (linear acceleration), an unused "
+            "field of the export, or the wrong columns); check the column mapping (--columns)"
+        )
     if report.n_intervals == 0:
         raise ValueError(
             "static detection found no static interval: "

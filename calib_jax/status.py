@@ -54,8 +54,8 @@ _MESSAGES = {
     Status.CONVERGED_CHI2: "converged: the reduced chi2 is below eps3",
     Status.MAX_ITERATIONS: (
         "not converged: the iteration budget ran out, most often because the data do not "
-        "determine the model (see the warnings on coverage); with data that do, raise the "
-        "solver's max_iter (solver_options in Python)"
+        "determine the model (poses too few or too close together, or motion taken for "
+        "poses); with data that do, raise the solver's max_iter (solver_options in Python)"
     ),
     Status.NONFINITE: (
         "not fitted: the residual is NaN or inf at the starting point; remove non-finite "

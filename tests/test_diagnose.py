@@ -409,3 +409,16 @@ def test_marg_ckexplorer_through_the_cli(tmp_path):
     assert np.degrees(d["rms_before"]) == pytest.approx(2.49, abs=0.05)
     assert np.degrees(d["rms_after"]) == pytest.approx(2.44, abs=0.05)
     assert (tmp_path / "rep" / "angle_time.png").exists()
+
+
+def test_a_base_fit_that_does_not_converge_gives_no_verdict(monkeypatch):
+    """RocketPy's CATS Vega flight log (a descent read as poses): the base fit ran out of
+    iterations and `calib-jax diagnose` still gave 'unexplained_structure' with exit 0,
+    judging effects against a calibration that was never found. Here the solver's budget is
+    cut to one iteration, so the base fit of a clean log cannot converge: no verdict."""
+    compiled = M._compiled_fit
+    monkeypatch.setattr(M, "_compiled_fit", lambda max_iter: compiled(1))
+    s = simulate_accel_log((), seed=2)
+    d = diagnose_accel(s.raw, t=s.t, temp=s.temp, intervals=s.intervals)
+    assert d.verdict == "not_possible"
+    assert "the base model's fit did not converge" in d.notes[0]

@@ -883,3 +883,21 @@ def test_interleaved_sensor_instances_are_read_one_at_a_time(tmp_path):
     # a column named I that does not take turns (a current, a counter) is read as it is
     plain = head + "".join(f"{0.04 * k:.2f},{40000 * k},{k},0,0,0,0,0,-9.8,37\n" for k in range(20))
     assert len(load_log(_write(tmp_path, plain, "plain.csv"))) == 20
+
+
+def test_a_given_sample_rate_replaces_a_time_column_that_does_not_tick(tmp_path):
+    """RocketPy's TeleMega export repeats time stamps (511 steps do not rise): the gyro fit
+    said 'leave the time column out and give --sample-rate', and with --sample-rate (and
+    --columns naming no time) it read the same column again and said the same. A given rate
+    now replaces a time column that does not increase, with a note; a rising one is kept."""
+    rows = "".join(f"{0.01 * (k // 2):.2f},0.1,0.2,0.9\n" for k in range(40))
+    p = _write(tmp_path, "time,ax,ay,az\n" + rows)
+    assert load_log(p).t is not None  # without a rate: kept, for the fit to refuse and say why
+    log = load_log(p, sample_rate=100.0)
+    assert log.t is None and log.sample_rate == 100.0
+    assert any("does not increase (20 steps)" in n for n in log.notes)
+    good = "".join(f"{0.01 * k:.2f},0.1,0.2,0.9\n" for k in range(40))
+    assert (
+        load_log(_write(tmp_path, "time,ax,ay,az\n" + good, "g.csv"), sample_rate=50.0).t
+        is not None
+    )

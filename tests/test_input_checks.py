@@ -12,6 +12,7 @@ import time
 import numpy as np
 import pytest
 
+import calib_jax as cj
 from calib_jax import calibrate_accel
 from calib_jax.calibration import AccelCalibration, MagCalibration, write_json_atomic
 from calib_jax.io.files import SensorLog
@@ -512,3 +513,26 @@ def test_a_magnetometer_that_never_turned_is_no_calibration():
     cap = cap[rng.permutation(len(cap))]
     shuffled = _fit(cap)
     assert not any("the field barely changes" in w for w in shuffled.warnings)
+
+
+def test_an_accelerometer_without_gravity_is_named_so():
+    """Altus Metrum's TeleMega export (RocketPy's data, MIT): accelerometer columns near 0 in
+    every row (half of them exactly 0). `calib-jax accel` said 'no static interval ... noise
+    level nan', `diagnose` 'axis x is saturated: use a wider range'. A log that is mostly
+    exact zeros has no signal; one near 0 with no pose found holds no gravity in any unit
+    (linear acceleration looks the same)."""
+    rng = np.random.default_rng(0)
+    # TeleMega's pattern: x held at a few hundredths for a dozen rows at a time, y and z 0
+    # but for a rare count; the detector finds no pose in it
+    held = np.zeros((3000, 3))
+    held[:, 0] = np.repeat(rng.choice([0.0, 0.01, 0.02, 0.08], 250), 12)
+    held[::500, 1], held[::700, 2] = 0.01, 0.01
+    with pytest.raises(ValueError, match=r"reads about 0 \(median \|a\| 0\.02\).*no gravity"):
+        cj.calibrate_accel(held, sample_rate=100.0)
+    dead = 0.02 * rng.normal(size=(3000, 3))
+    dead[::3] = 0.0
+    dead[1::3] = 0.0
+    with pytest.raises(ValueError, match="reads exactly 0 on every axis in 2000 of 3000 rows"):
+        cj.calibrate_accel(dead, sample_rate=100.0)
+    with pytest.raises(ValueError, match="magnetometer reads exactly 0"):
+        cj.calibrate_mag(dead)

@@ -56,6 +56,7 @@ from ..observations import TooFewPoses, accel_observations, screen_samples
 from ..padding import pad_rows
 from ..progress import finish, progress_bar
 from ..static import detect_rest
+from ..status import status_message
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
 from .honest import HELD_OUT_GAIN, held_out_rms, judge
@@ -833,6 +834,16 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
         float(np.nanmax([white, allan])) if np.any(np.isfinite([white, allan])) else float("nan")
     )
     fin, base = res["final"], res["base"]
+    if not base["converged"]:  # no calibration to judge effects against (a rocket's descent
+        # read as poses: 'unexplained structure', exit 0, beside a base fit that diverged)
+        return _not_possible(
+            obs.sensor,
+            obs.m,
+            "observations that determine the base calibration",
+            f"the base model's fit did not converge ({status_message(base['status'])}); "
+            f"calib-jax {'accel' if obs.sensor == 'accel' else 'mag'} on this log says why",
+            source,
+        )
     w = res["w"]
     # before and after are the first and last steps' rms, as the steps table shows them: the
     # base model on every observation, the final one on those kept (outliers rejected). Before

@@ -1286,6 +1286,17 @@ def _assemble(
         t, unit_note, time_scale = _time_in_seconds(t)
         if unit_note:
             notes.append(unit_note)
+    if sample_rate is not None and t is not None and (mapping is None or "t" not in mapping):
+        with np.errstate(invalid="ignore"):
+            steps = np.diff(t[np.isfinite(t)])
+        if np.any(steps <= 0):  # --sample-rate given for a clock that does not tick forward
+            bad = int(np.sum(steps <= 0))
+            notes.append(
+                f"the time column {names[source['t']]!r} does not increase ({bad} steps); the "
+                f"given sample rate ({sample_rate:g} Hz) is used instead"
+            )
+            t, layout = None, None
+            source = {k: v for k, v in source.items() if k != "t"}
     if rate is None and t is not None:
         with np.errstate(over="ignore", invalid="ignore"):
             dt = np.diff(t[np.isfinite(t)])
