@@ -931,9 +931,10 @@ def _add_diagnose_parser(sub) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("full", "sphere"),
-        default="full",
-        help="mag: the declared model (sphere makes soft_iron a candidate)",
+        choices=("auto", "full", "sphere"),
+        default="auto",
+        help="mag: the declared model; auto (default): the one calib-jax mag chooses for the "
+        "log (sphere makes soft_iron a candidate)",
     )
     p.add_argument("--degree", type=int, choices=(1, 2), default=1, help="effect polynomial degree")
     p.add_argument("--seed", type=int, default=0, help="seed of the null-test simulations")

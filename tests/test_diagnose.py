@@ -422,3 +422,18 @@ def test_a_base_fit_that_does_not_converge_gives_no_verdict(monkeypatch):
     d = diagnose_accel(s.raw, t=s.t, temp=s.temp, intervals=s.intervals)
     assert d.verdict == "not_possible"
     assert "the base model's fit did not converge" in d.notes[0]
+
+
+def test_the_declared_magnetometer_model_is_calib_jax_mags_choice():
+    """diagnose_mag declared the full ellipsoid whatever the log: on a CMU ALFA flight that
+    `calib-jax mag` fitted with a sphere (full 'not determined') the diagnosis fitted the full
+    model without a word. By default it now declares the model calibrate_mag chooses."""
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    raw = 45.0 * d + np.array([12.0, -7.0, 30.0]) + 0.2 * rng.normal(size=d.shape)
+    diag = diagnose_mag(raw, sample_rate=100.0, progress=False)
+    assert diag.steps[0]["model"] == "base" and diag.obs.base == "sphere"
+    assert any("declared model: sphere, as calib-jax mag chooses" in n for n in diag.notes)
+    with pytest.raises(ValueError, match="model must be 'auto', 'full' or 'sphere'"):
+        diagnose_mag(raw, model="diag")

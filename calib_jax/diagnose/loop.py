@@ -1142,7 +1142,7 @@ def _run_base_only(obs: Observations) -> np.ndarray:
 def diagnose_mag(
     data,
     *,
-    model: str = "full",
+    model: str = "auto",
     t: np.ndarray | None = None,
     temp: np.ndarray | None = None,
     sample_rate: float | None = None,
@@ -1156,7 +1156,10 @@ def diagnose_mag(
 
     Observations are samples (every k-th, at most ``max_points``); the error is
     (|m| - radius) / radius. ``model`` is the declared model: "full" (ellipsoid) or "sphere"
-    (hard iron only; ``soft_iron`` is then a candidate). Floors, from the longest rest if the
+    (hard iron only; ``soft_iron`` is then a candidate); "auto" (the default) declares the
+    model :func:`calib_jax.calibrate_mag` chooses for the log, so the diagnosis starts from
+    the calibration ``calib-jax mag`` gives (a sphere where it is the sphere; the full
+    ellipsoid where it chooses the full or the diagonal one). Floors, from the longest rest if the
     log has one: the per-sample scatter of the calibrated magnitude about a quadratic trend
     (white) and its Allan deviation at one sample; without a rest, the first-difference noise.
     ``progress``: a bar over the rounds, as in :func:`diagnose_accel`.
@@ -1167,8 +1170,8 @@ def diagnose_mag(
     t = t_log if t is None else t
     temp = temp_log if temp is None else temp
     sample_rate = sample_rate or rate
-    if model not in ("full", "sphere"):
-        raise ValueError(f"model must be 'full' or 'sphere', got {model!r}")
+    if model not in ("auto", "full", "sphere"):
+        raise ValueError(f"model must be 'auto', 'full' or 'sphere', got {model!r}")
     ok, screen_notes = screen_samples(x, "mag")  # the way in of calibrate_mag
     n = len(x)
     if t is None:
@@ -1181,6 +1184,14 @@ def diagnose_mag(
             "mag", len(keep), f"{MIN_OBSERVATIONS} samples", "too few samples", source
         )
     cal = calibrate_mag(x[ok], model=model)
+    chose = []
+    if model == "auto":  # calib-jax mag's choice (the ROS flight's full ellipsoid was 'not
+        # determined' for mag and declared here, fitted without a word)
+        model = "sphere" if cal.model == "sphere" else "full"
+        chose.append(
+            f"declared model: {model}, as calib-jax mag chooses for this log ({cal.model}; "
+            "--model full or sphere declares another)"
+        )
     if cal.status in ("failed", "not_converged"):
         return _not_possible(
             "mag",
@@ -1212,7 +1223,7 @@ def diagnose_mag(
         sensor="mag",
         kind=f"samples (every {k})",
     )
-    obs.notes.extend(screen_notes)
+    obs.notes.extend(chose + screen_notes)
     cands = tuple(
         cc
         for cc in candidates
