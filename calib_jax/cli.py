@@ -171,6 +171,18 @@ def load_input(
     return log
 
 
+def load_args(args, *, sensor=None, columns=None):
+    """:func:`load_input` of ``args.file`` with a one-log command's options (--columns unless
+    ``columns`` is given, --sample-rate, --instance)."""
+    return load_input(
+        args.file,
+        columns=args.columns if columns is None else columns,
+        sample_rate=args.sample_rate,
+        sensor=sensor,
+        instance=args.instance,
+    )
+
+
 # What the loader noted about the file (rows skipped, cells not finite, guessed columns): an
 # error later on prints them first, since they are often its real cause.
 _LOADER_NOTES: list[str] = []
@@ -233,13 +245,7 @@ def run_accel(args: argparse.Namespace) -> int:
     from .accel import calibrate_accel
 
     # calibrate_accel raises ValueError (exit 2 in main) when the log has no accelerometer
-    log = load_input(
-        args.file,
-        columns=args.columns,
-        sample_rate=args.sample_rate,
-        sensor="accel",
-        instance=args.instance,
-    )
+    log = load_args(args, sensor="accel")
     cal = calibrate_accel(
         log,
         g=args.g,
@@ -263,13 +269,7 @@ def run_mag(args: argparse.Namespace) -> int:
     _enable_x64()
     from .mag import calibrate_mag
 
-    log = load_input(
-        args.file,
-        columns=args.columns,
-        sample_rate=args.sample_rate,
-        sensor=args.sensor,
-        instance=args.instance,
-    )
+    log = load_args(args, sensor=args.sensor)
     cal = calibrate_mag(
         log,
         model=args.model,
@@ -442,13 +442,7 @@ def run_marg(args: argparse.Namespace) -> int:
 
     # sensor="mag": a headerless 6-column file is accelerometer then magnetometer, as calib-jax
     # mag reads it (it was read as accelerometer + gyro, and marg then asked for mx, my, mz)
-    log = load_input(
-        args.file,
-        columns=args.columns,
-        sample_rate=args.sample_rate,
-        sensor="mag",
-        instance=args.instance,
-    )
+    log = load_args(args, sensor="mag")
     if args.accel in ("ellipsoid", "none") and (
         detector_options(args, log.sample_rate) or args.block is not None
     ):
@@ -510,12 +504,7 @@ def run_gyro(args: argparse.Namespace) -> int:
     from .io.files import join_gyro
 
     if args.gyro_file is None:
-        log = load_input(
-            args.file,
-            columns=args.columns,
-            sample_rate=args.sample_rate,
-            instance=args.instance,
-        )
+        log = load_args(args)
         if log.gyro is None:
             raise ValueError(
                 f"{args.file}: the log has no gyro columns (gx, gy, gz): map them with "
@@ -524,9 +513,14 @@ def run_gyro(args: argparse.Namespace) -> int:
             )
     else:
         acc_columns, gyro_columns = _split_gyro_columns(args.columns)
-        kw = dict(sample_rate=args.sample_rate, instance=args.instance)
-        log = load_input(args.file, columns=acc_columns, sensor="accel", **kw)
-        glog = load_input(args.gyro_file, columns=gyro_columns, sensor="gyro", **kw)
+        log = load_args(args, sensor="accel", columns=acc_columns)
+        glog = load_input(  # its own columns only (None: its header or the guess)
+            args.gyro_file,
+            columns=gyro_columns,
+            sample_rate=args.sample_rate,
+            sensor="gyro",
+            instance=args.instance,
+        )
         log = join_gyro(log, glog)
     cal = calibrate_gyro(
         log,

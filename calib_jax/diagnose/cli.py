@@ -16,19 +16,13 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cli import _enable_x64, detector_options, load_input
+    from ..cli import _enable_x64, detector_options, load_args
 
     _enable_x64()
     from .loop import diagnose_accel, diagnose_mag
 
-    log = load_input(
-        args.file,
-        columns=args.columns,
-        sample_rate=args.sample_rate,
-        instance=args.instance,
-        # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
-        sensor="mag" if args.sensor == "marg" else args.sensor,
-    )
+    # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
+    log = load_args(args, sensor="mag" if args.sensor == "marg" else args.sensor)
     guessed = ""
     if args.sensor is None:  # the accelerometer, unless the log has only a magnetometer
         args.sensor = "mag" if log.acc is None and log.mag is not None else "accel"
