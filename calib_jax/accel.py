@@ -295,6 +295,12 @@ def _vec(v: np.ndarray) -> str:
 # traced and looked up in a new process: 1.6 s of a 5 s warm `calib-jax accel`
 
 
+def nominal_centre_of(obs: AccelObservations) -> np.ndarray:
+    """The nominal zero of the fit points (zero, or mid-range for unsigned counts) in the unit
+    their norm suggests: where poses are judged from when a fitted centre may mislead."""
+    return _nominal(obs.points, _units_from_norm(obs.static_norm) or "counts", 1.0)[0]
+
+
 def check_poses(
     obs: AccelObservations, model: str, sample_rate: float | None = None
 ) -> tuple[np.ndarray, float]:
@@ -309,7 +315,7 @@ def check_poses(
     # counted about the fitted centre and about the nominal one (zero, or mid-range for
     # unsigned counts): points of a single pose fit no sphere, and about their own arbitrary
     # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
-    nominal_centre = _nominal(pts, _units_from_norm(obs.static_norm) or "counts", 1.0)[0]
+    nominal_centre = nominal_centre_of(obs)
     n_distinct = max(
         1, min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
     )
@@ -355,7 +361,7 @@ def _check_poses_for(
         # about the fitted centre and the nominal one: a sphere through a cap of poses puts
         # its centre anywhere, and about it the cap showed 'each axis up and down' (a EuRoC
         # flight, every pose within 28 deg of one direction)
-        nominal = _nominal(obs.points, _units_from_norm(obs.static_norm) or "counts", 1.0)[0]
+        nominal = nominal_centre_of(obs)
         if not (_holds_six_faces(obs.points, c_s) and _holds_six_faces(obs.points, nominal)):
             raise TooFewPoses(
                 f"{exc.finding}; nor do the poses hold each axis pointing up and down, which "

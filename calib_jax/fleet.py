@@ -50,12 +50,12 @@ def prepare_log(
         valid, notes = screen_samples(x, "mag")
         info["notes"] = list(log.notes) + notes
         return x[valid], info
-    from .accel import MODELS, _coverage_warnings, _nominal, check_poses
+    from .accel import MODELS, _coverage_warnings, check_poses, nominal_centre_of
 
     obs = accel_observations(x, use=use, sample_rate=log.sample_rate, **detector)
     centre, radius = check_poses(obs, model or "accel9", log.sample_rate)
     n_free = int(sum(MODELS[model or "accel9"]))
-    nominal = _nominal(obs.points, _units_of(obs), 1.0)[0]
+    nominal = nominal_centre_of(obs)
     info.update(
         # what the single fit warns of the poses' spread (one hemisphere, a cap), as it words it
         warnings=_coverage_warnings(
@@ -122,12 +122,6 @@ def fit_prepared(
             _judge_accel(e, info, options.get("model") or "accel9")
         out.append({**e, **info, **ref})
     return out
-
-
-def _units_of(obs) -> str:
-    from .accel import _units_from_norm
-
-    return _units_from_norm(obs.static_norm) or "counts"
 
 
 def _judge_accel(entry: dict, info: dict, model: str) -> None:

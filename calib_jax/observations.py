@@ -183,15 +183,16 @@ def accel_observations(
     valid, warnings = screen_samples(x, "accel")
     report = detect_static(x, sample_rate=sample_rate, valid=valid, **detector)
     notes = report.notes(sample_rate)
-    level = float(np.median(np.linalg.norm(x[np.isfinite(x).all(axis=1)], axis=1)))
-    if report.n_intervals == 0 and level < NO_GRAVITY:  # the cause, not the detector's miss
-        raise ValueError(
-            f"the accelerometer reads about 0 (median |a| {level:.3g}): gravity reads 1 in g, "
-            "9.8 in m/s^2 and hundreds or more in counts, so these readings hold no gravity (a "
-            "sensor that was off, gravity already removed (linear acceleration), an unused "
-            "field of the export, or the wrong columns); check the column mapping (--columns)"
-        )
     if report.n_intervals == 0:
+        level = float(np.median(np.linalg.norm(x[np.isfinite(x).all(axis=1)], axis=1)))
+        if level < NO_GRAVITY:  # the cause, not the detector's miss
+            raise ValueError(
+                f"the accelerometer reads about 0 (median |a| {level:.3g}): gravity reads 1 in "
+                "g, 9.8 in m/s^2 and hundreds or more in counts, so these readings hold no "
+                "gravity (a sensor that was off, gravity already removed (linear acceleration), "
+                "an unused field of the export, or the wrong columns); check the column mapping "
+                "(--columns)"
+            )
         raise ValueError(
             "static detection found no static interval: "
             + detection_found(report, sample_rate)
