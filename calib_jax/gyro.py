@@ -985,15 +985,17 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     warn: list[str] = []
     windows = _motion_windows(iv)
     gap = max(GAP_S, GAP_STEPS / rate)
-    gapped = [(i, s, e) for i, s, e in windows if dt[s : e - 1].max(initial=0.0) > gap]
+    longest_step = [dt[s : e - 1].max(initial=0.0) for _, s, e in windows]
+    gapped = [w for w, step in zip(windows, longest_step, strict=True) if step > gap]
+    gap_warning = ""
     if gapped:
-        longest = max(dt[s : e - 1].max() for _, s, e in gapped)
-        warn.append(
+        gap_warning = (
             f"{len(gapped)} of {len(windows)} motions span a gap in the time column (up to "
-            f"{longest:.3g} s without a sample, at {rate:.4g} Hz): the rotation during a gap "
-            "was not recorded, so those motions were left out (a log joined from several "
-            "recordings, or a logger that paused)"
+            f"{max(longest_step):.3g} s without a sample, at {rate:.4g} Hz): the rotation "
+            "during a gap was not recorded, so those motions were left out (a log joined from "
+            "several recordings, or a logger that paused)"
         )
+        warn.append(gap_warning)
     windows = [w for w in windows if w not in gapped]
     too_long = [(i, s, e) for i, s, e in windows if dt[s : e - 1].sum() > MAX_MOTION_S]
     if too_long:
@@ -1016,7 +1018,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             f"{len(windows)} usable motions between {len(iv)} static poses: the gyro fit needs "
             f"at least {MIN_MOTIONS} rotations from one still pose to the next, about all "
             "three axes; record more poses with turns between them"
-            + "".join(f" ({w})" for w in warn if "gap in the time column" in w)
+            + (f" ({gap_warning})" if gap_warning else "")
         )
 
     if temp is not None:

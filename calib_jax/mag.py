@@ -340,9 +340,12 @@ def _barely_turned(xv: np.ndarray, spread: float) -> bool:
     return spread <= BARELY_TURNED * noise
 
 
-def _check_not_flat(xn: np.ndarray, xv: np.ndarray, mean: np.ndarray, s: float) -> None:
+def _check_not_flat(
+    xn: np.ndarray, xv: np.ndarray, mean: np.ndarray, s: float, what: str = "field"
+) -> None:
     """A ValueError when the normalised samples' directions lie in one plane (``xv``, their
-    mean and spread ``s``: the samples as read, to tell a sensor that hardly moved)."""
+    mean and spread ``s``: the samples as read, to tell a sensor that hardly moved; ``what``
+    the vector measured, "field" or "gravity", for the message)."""
     evals, evecs = np.linalg.eigh(np.cov(xn[:: max(1, len(xn) // 100_000)].T))
     normal = evecs[:, 0] if evals[0] < FLAT_POINTS * evals[2] else None
     if normal is None:
@@ -358,16 +361,16 @@ def _check_not_flat(xn: np.ndarray, xv: np.ndarray, mean: np.ndarray, s: float) 
         return
     if np.linalg.norm(mean) > 3 * s and _barely_turned(xv, s):
         raise ValueError(
-            f"the field barely changes in the sensor frame: the samples spread by {s:.3g} "
+            f"the {what} barely changes in the sensor frame: the samples spread by {s:.3g} "
             f"(RMS) about {_vec(mean)}, within {BARELY_TURNED:g}x of their sample-to-sample "
             "noise: the sensor was hardly turned. Record a slow tumble through all orientations"
         )
-    raise ValueError(_one_plane(normal))
+    raise ValueError(_one_plane(normal, what))
 
 
-def _one_plane(normal: np.ndarray) -> str:
+def _one_plane(normal: np.ndarray, what: str = "field") -> str:
     return (
-        f"the field directions lie in one plane (normal {_vec(normal)} in the sensor frame): "
+        f"the {what} directions lie in one plane (normal {_vec(normal)} in the sensor frame): "
         "this looks like a turn about a single axis, which cannot determine an ellipsoid. "
         "Tumble the sensor through all orientations; a one-axis turn is what the plane "
         "alignment (calib_jax.align.plane_alignment) needs instead"
@@ -475,7 +478,7 @@ def calibrate_mag(
     _check_options(model, solver, field)
     xv, mean, s, warn = _screened(x)
     xn = (xv - mean) / s
-    _check_not_flat(xn, xv, mean, s)
+    _check_not_flat(xn, xv, mean, s, "gravity" if sensor == "accel" else "field")
     opts = tuple(sorted((solver_options or {}).items()))
     fits, chosen, selection = _fit_candidates(xn, model, solver, opts, warn)
     res, c_n, M_n = fits[chosen][:3]

@@ -488,7 +488,7 @@ def calibrate_marg_log(
             except ValueError as exc:  # gravity in one plane or direction: no ellipsoid
                 if accel != "auto":
                     raise
-                acal, why = None, str(exc).replace("field directions", "gravity directions")
+                acal, why = None, str(exc)
         if accel == "auto" and (acal is None or not acal.success):
             # a failed ellipsoid (too little of the sphere covered) would spoil the rotation
             warn.append(
