@@ -21,6 +21,13 @@ from pathlib import Path
 
 from .datasets import demo_log_path
 
+LOG_SUFFIXES = tuple(base + z for base in (".csv", ".tsv") for z in ("", ".gz", ".bz2", ".xz")) + (
+    ".mat",
+)
+"""What ``calib-jax batch`` reads without --pattern: tables and MATLAB files (not .txt, which
+holds READMEs and licences as often as logs)."""
+_LOG_NAMES = ".csv, .tsv (also gzip, bzip2 or xz compressed) or .mat"
+
 # ---------------------------------------------------------------------------------------------
 # option types: a bad value is a usage error (exit 2) naming the option and the value
 
@@ -299,9 +306,16 @@ def run_batch(args: argparse.Namespace) -> int:
     root = Path(args.dir)
     if not root.is_dir():
         raise ValueError(f"{root} is not a directory")
-    paths = sorted(str(p) for p in root.rglob(args.pattern) if p.is_file())
+    every = sorted(p for p in root.rglob("*") if p.is_file() and not p.name.startswith("."))
+    if args.pattern is None:
+        paths = [str(p) for p in every if p.name.lower().endswith(LOG_SUFFIXES)]
+    else:
+        paths = sorted(str(p) for p in root.rglob(args.pattern) if p.is_file())
     if not paths:
-        raise ValueError(f"no files matching {args.pattern!r} under {root}; set --pattern")
+        wanted = repr(args.pattern) if args.pattern else "a log's name (" + _LOG_NAMES + ")"
+        raise ValueError(f"no files matching {wanted} under {root}; set --pattern")
+    chosen = set(paths)
+    others = [p for p in every if str(p) not in chosen]
     options = {}
     if args.sensor == "accel":
         options.update(g=args.g, model=args.model or "accel9")
@@ -313,6 +327,13 @@ def run_batch(args: argparse.Namespace) -> int:
     # one model for every log of a batch (calib-jax accel / mag choose per log)
     model = f", model {options['model']} for every log" if "model" in options else ""
     print(f"calib-jax batch: {files} under {root}, sensor {args.sensor}{model}")
+    if others:
+        shown = ", ".join(p.name for p in others[:4]) + (", ..." if len(others) > 4 else "")
+        which = f"matching {args.pattern!r}" if args.pattern else f"named like a log ({_LOG_NAMES})"
+        print(
+            f"left out: {len(others)} other file(s), not {which}: {shown}; set --pattern to "
+            "read them"
+        )
     if args.dask is not None:
         results = calibrate_files_dask(
             paths,
@@ -723,7 +744,11 @@ def build_parser() -> argparse.ArgumentParser:
         "batch", help="calibrate every log under a directory, in chunks (or on a Dask cluster)"
     )
     b.add_argument("dir")
-    b.add_argument("--pattern", default="*.csv", help="file glob, searched recursively")
+    b.add_argument(
+        "--pattern",
+        default=None,
+        help=f"file glob, searched recursively (default: names ending {_LOG_NAMES})",
+    )
     b.add_argument(
         "--sensor",
         default="accel",

@@ -175,6 +175,22 @@ def test_preamble_title_and_comments(tmp_path):
         np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
 
 
+def test_empatica_start_time_and_rate_rows_are_not_samples(tmp_path):
+    # Empatica E4's ACC.csv (hpi-dhc/devicely, collab-uniba/BiometricsMSR2023): a row of the
+    # start time (Unix s) and a row of the rate, each repeated in every column, then the counts.
+    # They were read as two samples of 1.7e9 and 32 counts.
+    head = "1680686620.000000, 1680686620.000000, 1680686620.000000\n" + "32.000000, " * 2
+    head += "32.000000\n"
+    log = load_log(_write(tmp_path, head + _table(ROWS[:, 1:4])))
+    np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
+    assert log.sample_rate == 32.0
+    assert any("Empatica E4's start time (1680686620 s" in n for n in log.notes)
+    assert not any("wrong number of fields" in n for n in log.notes)
+    # a log whose first rows merely repeat one value (a sensor at rest) keeps them
+    still = np.vstack([np.full((2, 3), 5.0), ROWS[:, 1:4]])
+    np.testing.assert_array_equal(load_log(_write(tmp_path, _table(still))).acc, still)
+
+
 def test_trailing_separator_and_quoted_cells(tmp_path):
     text = '"t","ax","ay","az",\n' + "".join(
         ",".join(f'"{v:g}"' for v in r) + ",\n" for r in ROWS[:, :4]

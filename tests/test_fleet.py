@@ -193,6 +193,25 @@ def test_batch_cli_streams_json(fleet_dir, tmp_path, capsys):
     )
 
 
+def test_batch_reads_compressed_logs_and_names_what_it_left_out(fleet_dir, tmp_path, capsys):
+    """Without --pattern the batch reads every kind of log the loader reads (a gzip CSV was
+    passed over in silence: '*.csv' was the default) and names the files it did not read."""
+    import gzip
+
+    src, truth = fleet_dir
+    d = tmp_path / "logs"
+    d.mkdir()
+    (d / "imu0.csv.gz").write_bytes(gzip.compress((src / "imu0.csv").read_bytes()))
+    (d / "NOTES.md").write_text("where the logs came from\n")
+    out = tmp_path / "b.json"
+    assert main(["batch", str(d), "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "1 file under" in printed and "left out: 1 other file(s)" in printed
+    assert "NOTES.md; set --pattern to read them" in printed
+    (entry,) = json.loads(out.read_text())["results"]
+    assert entry["status"] == "ok" and entry["path"].endswith("imu0.csv.gz")
+
+
 def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nope")]) == 2
     assert "not a directory" in capsys.readouterr().err

@@ -462,6 +462,19 @@ def _rate_in_comment(line: str) -> float | None:
     return None
 
 
+def _start_and_rate_rows(rows: list[list[str]], num) -> tuple[float, float] | None:
+    """Empatica E4's header (ACC.csv, BVP.csv, ...): before the samples, a row of the start
+    time in Unix seconds and a row of the sample rate in Hz, each the same in every column.
+    (start time, rate) when the first two of ``rows`` are those and the third is a sample."""
+    if len(rows) < 3 or len(rows[0]) < 2 or not all(num(c) for r in rows[:2] for c in r):
+        return None
+    first, second = ({float(_strip_cell(c)) for c in r} for r in rows[:2])
+    if len(first) != 1 or len(second) != 1 or len(set(map(_strip_cell, rows[2]))) == 1:
+        return None
+    t0, rate = first.pop(), second.pop()
+    return (t0, rate) if t0 > 1e8 and 0 < rate <= 1e5 else None
+
+
 def _line_end(line: str, delim: str) -> str:
     """The line without its trailing white space, a tab kept when tabs separate the fields
     (Xsens MT Manager ends every row with one: '1\t2\t3\t')."""
@@ -708,13 +721,21 @@ def _read_text(
             "'t,ax,ay,az' then one row of numbers per sample"
         )
 
+    e4 = _start_and_rate_rows([split(ln) for ln in lines[start : start + 3]], num)
+    if e4 is not None:  # Empatica E4: the start time and the rate stand as two rows of data
+        start += 2
+        notes.append(
+            f"rows 1-2 read as Empatica E4's start time ({e4[0]:.0f} s, Unix time) and sample "
+            "rate, each repeated in every column, not as samples"
+        )
+
     # walk back from the first data row: ragged rows of numbers, then the header (a text line,
     # possibly followed by a units line), then the preamble
     bad = 0
     header_rows: list[tuple[int, list[str]]] = []
     odd_header = None
     stop = 0
-    j = start - 1
+    j = start - (1 if e4 is None else 3)
     while j >= 0:
         ln = lines[j]
         if _skip(ln):
@@ -767,7 +788,7 @@ def _read_text(
                 header = names
                 notes.append(f"column names read from the comment line {ln.strip()[:70]!r}")
                 break
-    preamble: dict[str, float] = {}
+    preamble: dict[str, float] = {} if e4 is None else {"sample rate": e4[1]}
     ignored = []
     for ln in lines[:stop]:
         rate = _rate_in_comment(ln) if _skip(ln) else None
