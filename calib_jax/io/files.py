@@ -462,13 +462,14 @@ def _rate_in_comment(line: str) -> float | None:
     return None
 
 
-def _start_and_rate_rows(rows: list[list[str]], num) -> tuple[float, float] | None:
+def _start_and_rate_rows(rows: list[list[str]], num, value) -> tuple[float, float] | None:
     """Empatica E4's header (ACC.csv, BVP.csv, ...): before the samples, a row of the start
     time in Unix seconds and a row of the sample rate in Hz, each the same in every column.
-    (start time, rate) when the first two of ``rows`` are those and the third is a sample."""
+    (start time, rate) when the first two of ``rows`` are those and the third is a sample;
+    ``num`` says whether a cell is a number, ``value`` reads it."""
     if len(rows) < 3 or len(rows[0]) < 2 or not all(num(c) for r in rows[:2] for c in r):
         return None
-    first, second = ({float(_strip_cell(c)) for c in r} for r in rows[:2])
+    first, second = ({value(c) for c in r} for r in rows[:2])
     if len(first) != 1 or len(second) != 1 or len(set(map(_strip_cell, rows[2]))) == 1:
         return None
     t0, rate = first.pop(), second.pop()
@@ -721,7 +722,11 @@ def _read_text(
             "'t,ax,ay,az' then one row of numbers per sample"
         )
 
-    e4 = _start_and_rate_rows([split(ln) for ln in lines[start : start + 3]], num)
+    def value(c: str) -> float:
+        c = _strip_cell(c)
+        return float(c.replace(",", ".") if dec else c)
+
+    e4 = _start_and_rate_rows([split(ln) for ln in lines[start : start + 3]], num, value)
     if e4 is not None:  # Empatica E4: the start time and the rate stand as two rows of data
         start += 2
         notes.append(
@@ -799,7 +804,7 @@ def _read_text(
         cells = [_strip_cell(c) for c in _cells(ln, delim)]
         cells = [c for c in cells if c] if delim is not None else cells
         if len(cells) == 2 and not _num(cells[0]) and num(cells[1]):
-            preamble[cells[0].lower()] = float(cells[1].replace(",", ".") if dec else cells[1])
+            preamble[cells[0].lower()] = value(cells[1])
         else:
             ignored.append(ln.strip())
     if ignored:
