@@ -316,16 +316,23 @@ def check_poses(
     # unsigned counts): points of a single pose fit no sphere, and about their own arbitrary
     # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
     nominal_centre = nominal_centre_of(obs)
-    n_distinct = max(
-        1, min(distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre))
-    )
+    n_fitted, n_nominal = distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre)
+    n_distinct = max(1, min(n_fitted, n_nominal))
+    about = ""
+    if n_fitted != n_nominal:  # say which count this is: the detector's counts are the other
+        about = (
+            f", about the nominal centre ({', '.join(f'{v:.3g}' for v in nominal_centre)}); "
+            f"{n_fitted} about the sphere fitted through them"
+            if n_nominal < n_fitted
+            else f", about the sphere fitted through them; {n_nominal} about the nominal centre"
+        )
     n_free = int(sum(MODELS[model]))
     if len(obs.means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
         _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
     if n_distinct < n_free:
         raise TooFewPoses(
-            f"only {n_distinct} distinct poses (gravity directions at least 10 degrees apart) "
-            f"among the {len(pts)} fit points: static detection "
+            f"only {n_distinct} distinct poses (gravity directions at least 10 degrees apart"
+            f"{about}) among the {len(pts)} fit points: static detection "
             f"{detection_found(obs.report, sample_rate)}; the {n_free}-parameter model needs at "
             f"least {n_free} poses spread over the sphere (paper 1 uses 48)",
             n_distinct,

@@ -396,12 +396,31 @@ def _compiled(name: str, update_type: int = 1):
 # host side
 
 
-def _time_steps(t, sample_rate, n: int) -> tuple[np.ndarray, float]:
+TIES_MAX = 0.05
+"""At most this share of a time column's steps may be zero (a clock coarser than the sampling
+writes some stamps twice, e.g. ms stamps at 52 Hz): each run of equal stamps is then spread
+evenly up to the next one. More, or any step back, is a clock the fit cannot use."""
+
+
+def _time_steps(t, sample_rate, n: int, notes: list[str]) -> tuple[np.ndarray, float]:
     """(dt (N,), the time from each sample to the next; the sample rate) from the time column
-    or the sample rate; a ValueError saying what to give when neither is there."""
+    or the sample rate; a ValueError saying what to give when neither is there. Repeated
+    stamps (:data:`TIES_MAX`) are spread, with a note."""
     if t is not None:
         t = np.asarray(t, float)
         dt = np.diff(t)
+        ties = int(np.sum(dt == 0))
+        if ties and np.all(np.isfinite(dt)) and np.all(dt >= 0) and ties <= TIES_MAX * len(dt):
+            first = np.flatnonzero(np.r_[True, dt > 0])  # where each run of equal stamps starts
+            run = np.diff(np.r_[first, len(t)])
+            ends = np.r_[t[first[1:]], t[-1] + np.median(dt[dt > 0])]
+            step = np.repeat((ends - t[first]) / run, run)
+            t = t + step * (np.arange(len(t)) - np.repeat(first, run))
+            dt = np.diff(t)
+            notes.append(
+                f"{ties} time stamps repeat the one before (a clock coarser than the samples); "
+                "each run of equal stamps was spread evenly to the next"
+            )
         if not np.isfinite(t).any():
             raise ValueError(
                 f"the column read as time holds no numbers ({len(t)} cells are text or empty): "
@@ -948,7 +967,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
         mag = None if mag is None else mag[rows]
         temp = None if temp is None else np.asarray(temp, float)[rows]
-    dt, rate = _time_steps(t, sample_rate, len(g))
+    dt, rate = _time_steps(t, sample_rate, len(g), notes)
     _check_turn_axes(g)
     if accel is None:
         # six-face logs: gravity's direction needs no cross terms

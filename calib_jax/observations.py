@@ -224,7 +224,10 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
     setting = report.setting(sample_rate).removeprefix("static detection: ")
     found = f"found {report.n_intervals} static intervals with {setting}"
     if tried > 1:
-        found += f"; of the {tried} settings tried, the most distinct poses any found was {most}"
+        found += (
+            f"; of the {tried} settings tried, the most distinct poses any found was {most} "
+            "(each about the ellipsoid fitted through its own interval means)"
+        )
     if tried > 1 and most <= 1 and len(on_sphere) < tried:
         found += (
             f" (no setting's interval means lay on one ellipsoid within {100 * SPHERE_RMS:g} % "

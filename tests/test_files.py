@@ -858,10 +858,29 @@ def test_ros_px4_and_phone_export_names_read_without_flags(tmp_path):
         ("accelerometer_integral_dt", None),
         ("X", None),
         ("field.gyro.x (m/s^2)", None),
+        # Shimmer3 (Consensys export, hpi-dhc/devicely): a device id before, CAL after the axis
+        ("Shimmer_40AC_Accel_LN_X_CAL", "ax"),
+        ("Shimmer_40AC_Gyro_Y_CAL", "gy"),
+        ("Shimmer_40AC_Mag_Z_CAL", "mz"),
+        ("Shimmer_40AC_Timestamp_Unix_CAL", "t"),
+        ("Shimmer_40AC_GSR_Skin_Conductance_CAL", None),
+        ("Shimmer_40AC_Ext_Exp_A15_CAL", None),
+        ("ICM20948_accel_x", "ax"),
     ],
 )
 def test_names_read_word_by_word(name, canon):
     assert canonical_name(name) == canon
+
+
+def test_bare_axis_names_are_the_command_sensor(tmp_path):
+    """A header of X, Y, Z alone (Faros 180's ACC.csv, hpi-dhc/devicely) names no sensor: it
+    is read as a headerless 3-column file is, the command's sensor, with a note (it was 'no
+    sensor columns recognised in ['X', 'Y', 'Z']' on every command)."""
+    path = _write(tmp_path, "X,Y,Z\n" + _table(ROWS[:, 1:4]))
+    log = load_log(path, sensor="mag")
+    np.testing.assert_array_equal(log.mag, ROWS[:, 1:4])
+    assert log.acc is None and any("name no sensor: read as mx my mz" in n for n in log.notes)
+    np.testing.assert_array_equal(load_log(path).acc, ROWS[:, 1:4])
 
 
 def test_unrecognised_names_get_an_example_for_the_command_sensor(tmp_path):

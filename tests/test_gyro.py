@@ -299,7 +299,24 @@ def test_clock_and_length_problems(sim):
     with pytest.raises(ValueError, match="neither a time column nor a sample rate"):
         calibrate_gyro(sim.acc, sim.gyro)
     t = sim.t.copy()
-    t[100] = t[99]
+    t[100] = t[99] - 1e-3  # a step back
+    with pytest.raises(ValueError, match="time column must increase"):
+        calibrate_gyro(sim.acc, sim.gyro, t=t)
+
+
+def test_repeated_time_stamps_are_spread_to_the_next(sim):
+    # a clock coarser than the samples writes some stamps twice (Shimmer3's ms stamps at 52 Hz
+    # repeat 4 times in 90 rows): each repeat is spread between its neighbours, which on this
+    # evenly sampled log restores the true clock, so the fit equals the clean one (to 1e-9
+    # relative: the restored stamps differ from the true ones by round-off)
+    t = sim.t.copy()
+    every = np.arange(50, len(t) - 1, 200)  # 0.5 % of the steps
+    t[every] = t[every - 1]
+    cal = calibrate_gyro(sim.acc, sim.gyro, t=t)
+    ref = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    np.testing.assert_allclose(cal.matrix, ref.matrix, rtol=1e-9)
+    assert any(f"{len(every)} time stamps repeat the one before" in n for n in cal.notes)
+    t[50:1000] = t[50]  # a clock that stops: no timing to restore
     with pytest.raises(ValueError, match="time column must increase"):
         calibrate_gyro(sim.acc, sim.gyro, t=t)
 

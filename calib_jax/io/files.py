@@ -120,8 +120,10 @@ _UNIT_SENSOR = {
 _FILLER_WORDS = {
     "field", "linear", "data", "raw", "scaled", "imu", "sensor", "value", "values", "reading",
     "vector", "m", "s", "s2", "ms2", "mps2", "rad", "rads", "deg", "degs", "dps", "ga",
-    "gauss", "ut", "nt", "mt",
+    "gauss", "ut", "nt", "mt", "ln", "wr", "shimmer",
 }  # fmt: skip
+# words that may follow the axis: the vendor's calibrated / raw variant ('Gyro_X_CAL')
+_STATE_WORDS = {"cal", "calibrated", "uncal", "uncalibrated", "raw", "adc"}
 
 
 _UNIT_LABELS = {
@@ -159,11 +161,19 @@ def _name_by_words(name: str) -> str | None:
     units = [u.strip() for u in re.findall(r"[\(\[]([^\)\]]*)[\)\]]", low)]
     bare = re.sub(r"[\[\(].*?[\]\)]", " ", name.strip())
     words = [
-        w.lower() for w in re.findall(r"[A-Z]?[a-z]+[0-9]*|[A-Z]+[0-9]*(?![a-z])|[0-9]+\w*", bare)
+        w.lower()
+        for w in re.findall(r"[A-Z]?[a-z]+[0-9]*|[A-Z]+[0-9]*(?![a-z])|[0-9]+[A-Za-z0-9]*", bare)
     ]
+    if len(words) > 1 and words[-1] in _STATE_WORDS:
+        words.pop()  # Shimmer's 'Shimmer_40AC_Accel_LN_X_CAL'
+    # a word with both letters and digits is a device or part name (Shimmer's '40AC'), not a
+    # quantity
+    words = [w for w in words if not (re.search(r"\d", w) and re.search(r"[a-z]", w))]
     axis = "xyz"[int(index.group(1))] if index else None
     if axis is None and words and words[-1] in ("x", "y", "z"):
         axis = words.pop()
+    if axis is None and set(words) - _FILLER_WORDS - {"unix"} == {"timestamp"}:
+        return "t"  # 'Shimmer_40AC_Timestamp_Unix_CAL'; plain time names are aliases
     if "angular" in words and "velocity" in words:  # ROS sensor_msgs/Imu's angular_velocity
         words = [w for w in words if w not in ("angular", "velocity")] + ["gyro"]
     sensors = {_SENSOR_WORDS[w] for w in words if w in _SENSOR_WORDS}
@@ -991,7 +1001,7 @@ def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
             xyz,
             f"sensor {sensor}"
             if sensor
-            else "an accelerometer; pass sensor='mag' or 'gyro' for others",
+            else "an accelerometer, unless the command or sensor= names another",
         ),
         4: (["t", *xyz], "the imu_tk layout" if p == "a" else f"sensor {sensor}"),
         6: (six, why6),
@@ -1222,6 +1232,16 @@ def _assemble(
                 source[canon] = j
             elif canon is not None and mapping is None and source[canon] != j:
                 notes.append(f"column {h!r} also reads as {canon}; the first one is used")
+        bare = {_clean(h): j for j, h in enumerate(header) if _clean(h) in ("x", "y", "z")}
+        if len(bare) == 3 and not any(k[0] in "agm" for k in source):
+            # 'X,Y,Z' alone (Faros's ACC.csv): one sensor, read as a headerless file's would be
+            cols, why = _guess(3, sensor)
+            source.update({c: bare[a] for c, a in zip(cols, "xyz", strict=True)})
+            names_xyz = ", ".join(header[bare[a]] for a in "xyz")
+            notes.append(
+                f"columns {names_xyz} name no sensor: read as {' '.join(cols)} ({why}); pass "
+                "--columns to override"
+            )
     elif mapping is None:
         guess = _guess(width, sensor)
         if guess is None:
