@@ -424,7 +424,8 @@ def align_mag_to_accel(
     if ok.sum() < 50:
         raise ValueError(
             f"only {int(ok.sum())} samples have |a| and |m| within {100 * static_tol:.0f} % of "
-            "their medians; record slower motion or raise static_tol"
+            "their medians; record slower motion (in Python, align_mag_to_accel's static_tol "
+            "widens the band)"
         )
     a = acc[ok] / na[ok, None]
     m = mag[ok] / nm[ok, None]

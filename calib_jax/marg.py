@@ -506,8 +506,9 @@ def calibrate_marg_log(
         if mcal.success:
             raise
         why = "; ".join(mcal.warnings) or mcal.solver_message
-        raise ValueError(
-            f"{exc}. The magnetometer's ellipsoid fit is '{mcal.status}' too: {why}"
+        raise ValueError(  # the failed magnetometer first: the alignment's trouble follows
+            f"the magnetometer's ellipsoid fit is '{mcal.status}': {why}; the alignment with "
+            f"the accelerometer then fails too: {exc}"
         ) from exc
     warn += [f"alignment: {w}" for w in al.warnings]
     gyro = _gyro_block(log, acal, method, warn)

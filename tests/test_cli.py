@@ -257,6 +257,8 @@ def test_marg_on_a_flat_log_says_why_in_one_error(tmp_path, capsys):
     (line,) = [e for e in err.splitlines() if e.startswith("error:")]
     assert "gravity stays in about one direction" in line
     assert "magnetometer's ellipsoid fit is 'failed'" in line
+    # the cause first: the alignment fails because the magnetometer's fit did
+    assert line.index("magnetometer's ellipsoid fit") < line.index("gravity stays")
 
 
 def test_cli_prints_a_warning_as_one_line(tmp_path, capsys, monkeypatch):

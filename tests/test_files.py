@@ -872,6 +872,31 @@ def test_names_read_word_by_word(name, canon):
     assert canonical_name(name) == canon
 
 
+def test_trailing_field_of_marker_rows_and_datetime_stamps(tmp_path):
+    """Mind Monitor's Muse export (hpi-dhc/devicely): the header names a last field,
+    'Elements', that only marker rows write, and the time is a date and time. It was refused
+    ('39 names, but the data rows have 38 fields', with an example mapping EEG columns as the
+    accelerometer) and the time column was text."""
+    text = "TimeStamp,Accelerometer_X,Accelerometer_Y,Accelerometer_Z,Elements\n"
+    for i in range(40):
+        text += f"2021-04-05 15:48:{4 + 0.02 * i:06.3f},{0.1 * i:g},0.5,0.9\n"
+        if i == 7:
+            text += "2021-04-05 15:48:04.150,,,,/muse/elements/blink\n"
+    log = load_log(_write(tmp_path, text))
+    assert log.columns == {"t": "TimeStamp", "ax": "Accelerometer_X", "ay": "Accelerometer_Y",
+                           "az": "Accelerometer_Z"}  # fmt: skip
+    np.testing.assert_allclose(log.acc[:, 0], 0.1 * np.arange(40))
+    np.testing.assert_allclose(np.diff(log.t), 0.02, atol=1e-6)  # ms stamps
+    assert log.t[0] == pytest.approx(1617637684.0)  # Unix seconds of 2021-04-05 15:48:04 UTC
+    assert log.sample_rate == pytest.approx(50.0)
+    assert any("'Elements' are fields only some rows have" in n for n in log.notes)
+    assert not any("before the data ignored" in n for n in log.notes)
+    # without rows of the header's width it is no such header: still refused
+    bad = "t,ax,ay,az,Elements\n" + _table(ROWS[:, :4])
+    with pytest.raises(ValueError, match="looks like a header with 5 names"):
+        load_log(_write(tmp_path, bad, "b.csv"))
+
+
 def test_bare_axis_names_are_the_command_sensor(tmp_path):
     """A header of X, Y, Z alone (Faros 180's ACC.csv, hpi-dhc/devicely) names no sensor: it
     is read as a headerless 3-column file is, the command's sensor, with a note (it was 'no

@@ -545,7 +545,9 @@ def _parse_rows(
 ) -> tuple[np.ndarray, int]:
     """A float matrix of the rows with `width` fields (others skipped and counted).
 
-    `text_cols`: columns of labels (no numbers in the sample), left NaN without parsing.
+    `text_cols`: columns of labels (no numbers in the sample), left NaN without parsing,
+    except a column of dates and times ('2021-04-05 15:48:04.834', ISO 8601), read as Unix
+    seconds (:func:`_datetimes`).
     """
     if dec:
         rows = [ln.replace(",", ".") for ln in rows]
@@ -600,7 +602,26 @@ def _parse_rows(
                 by_line(lo + i, chunk[i : i + k])
             by_line(lo + i + k, chunk[i + k : i + k + 1])
             i += k + 1
+    for j in text_cols:
+        stamps = _datetimes([_cells(ln, delim)[j] for ln in good])
+        if stamps is not None:
+            out[:, j] = stamps
     return out, bad
+
+
+def _datetimes(cells: list[str]) -> np.ndarray | None:
+    """ISO 8601 dates and times ('2021-04-05 15:48:04.834') as Unix seconds (NaN for an
+    empty cell), or None when a cell is something else."""
+    cells = [_strip_cell(c) for c in cells]
+    if not any(cells) or not all(len(c) >= 10 and c[4] == "-" for c in cells if c):
+        return None
+    try:
+        stamps = np.array([c or "NaT" for c in cells], dtype="datetime64[us]")
+    except ValueError:
+        return None
+    out = stamps.astype("int64") / 1e6
+    out[np.isnat(stamps)] = np.nan
+    return out
 
 
 def iter_rows(path: str | Path, layout: dict, rows: int = 262_144):
@@ -768,7 +789,7 @@ def _read_text(
                 j -= 1
                 continue  # a units line under the names: look one further up
             if not header_rows and len(names) >= 2 and any(map(canonical_name, names)):
-                odd_header = names  # a header, by its names, that does not fit the rows
+                odd_header, odd_at = names, j  # a header, by its names, that does not fit
             stop = j + 1
             break
         if header_rows:
@@ -796,6 +817,18 @@ def _read_text(
                 "line(s) under the header skipped: " + "; ".join(",".join(r[1]) for r in others)
             )
         stop = min(r[0] for r in header_rows)
+    if odd_header is not None and len(odd_header) > width:
+        # names for trailing fields most rows leave out (Mind Monitor's 'Elements', written on
+        # marker rows only): the header fits the rows that have them, the first names the rest
+        rows_seen = [split(ln) for ln in lines[start:] + sample if ln != lines[odd_at]]
+        if any(len(r) == len(odd_header) for r in rows_seen):
+            extra = odd_header[width:]
+            notes.append(
+                f"the header has {len(odd_header)} names and most rows {width} fields: the last "
+                f"name(s) {', '.join(map(repr, extra))} are fields only some rows have; those "
+                "rows are skipped"
+            )
+            header, odd_header, stop = odd_header[:width], None, odd_at
     if header is None:  # names in a comment line above the data (YEI 3-Space's '# Data format')
         for ln in reversed(lines[:start]):
             names = _names_in_comment(ln, delim, width) if _skip(ln) and ln.strip() else None
