@@ -449,9 +449,18 @@ def calibrate_marg_log(
         raise ValueError(f"accel must be one of {ACCEL_METHODS}, got {accel!r}")
     log = as_log(log)
     if log.acc is None or log.mag is None:
+        read = [k for k in ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz")
+                if k in (log.columns or {})]  # fmt: skip
+        what = (
+            f"it has {', '.join(f'{k} ({log.columns[k]})' for k in read)}"
+            if read
+            else "none were read"
+        )
         raise ValueError(
             f"{log.path}: a MARG calibration needs accelerometer and magnetometer columns "
-            "(ax, ay, az, mx, my, mz); map them with --columns"
+            f"(ax, ay, az, mx, my, mz) of one recording; {what}. Map the columns with "
+            "--columns if the file holds both sensors; one sensor's file calibrates with "
+            "calib-jax accel or calib-jax mag"
         )
     warn: list[str] = []
     acal: AccelCalibration | MagCalibration | None = None

@@ -261,6 +261,17 @@ def test_marg_on_a_flat_log_says_why_in_one_error(tmp_path, capsys):
     assert line.index("magnetometer's ellipsoid fit") < line.index("gravity stays")
 
 
+def test_marg_on_one_sensors_file_says_what_it_has(tmp_path, capsys):
+    """A file of one 3-axis sensor (Faros's ACC.csv: X, Y, Z) given to marg: the error says
+    which columns it read and which command fits one sensor (it said only 'map them with
+    --columns', and the mapping it led to was refused next for the other sensor)."""
+    f = tmp_path / "ACC.csv"
+    f.write_text("X,Y,Z\n" + "".join(f"{i},{2 * i},{3 * i}\n" for i in range(30)))
+    assert main(["marg", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "it has mx (X), my (Y), mz (Z)" in err and "calib-jax accel or calib-jax mag" in err
+
+
 def test_cli_prints_a_warning_as_one_line(tmp_path, capsys, monkeypatch):
     """A warning raised inside a command (here one the command itself raises) is one
     'warning: ...' line on stderr with no source path; a fit's FitStatusWarning is left out
