@@ -74,8 +74,40 @@ class Record:
     __hash__ = None  # type: ignore[assignment]
 
 
+def _utc_now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SensorCalibration(Record):
+    """What the one-sensor calibrations (accelerometer, ellipsoid, gyroscope) share after
+    their own fields: what the fit could not pin down and what to act on, how the way in read
+    the file, who and when; ``success`` from the status word and ``==`` field by field
+    (arrays with numpy.array_equal, NaN equal to NaN). Keyword-only in the constructors."""
+
+    poorly_determined: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    """Problems a user should act on (rows left out, saturation, coverage, conditioning)."""
+    notes: list[str] = field(default_factory=list)
+    """What the way in found and chose: how the file was read, the detector's setting and
+    why (calib_jax.observations)."""
+    sensor_id: str | None = None
+    date: str = field(default_factory=_utc_now)
+    source: str | None = None
+    format_version: int = FORMAT_VERSION
+
+    @property
+    def success(self) -> bool:
+        return is_usable(self.status)
+
+    def __eq__(self, other) -> bool:
+        return _fields_equal(self, other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
 @dataclass(frozen=True, eq=False)
-class AccelCalibration(Record):
+class AccelCalibration(SensorCalibration):
     """Outcome of :func:`calib_jax.calibrate_accel`.
 
     ``status`` is "ok", "poorly_determined" (converged, but some parameter is not pinned down
@@ -108,12 +140,6 @@ class AccelCalibration(Record):
     rms_before: float
     rms_after: float
     noise_floor: float
-    poorly_determined: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    """Problems a user should act on (rows left out, saturation, coverage, conditioning)."""
-    notes: list[str] = field(default_factory=list)
-    """What the way in found and chose: how the file was read, the static detector's setting
-    and why (calib_jax.observations)."""
     static_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     """Raw means of the static intervals (n_intervals, 3), input units."""
     static_intervals: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), int))
@@ -123,20 +149,10 @@ class AccelCalibration(Record):
     nominal_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     nominal_scale: float = 1.0
     """The 'before' conversion (raw - nominal_offset) / nominal_scale, see calib_jax.accel."""
-    sensor_id: str | None = None
-    date: str = field(
-        default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-    )
-    source: str | None = None
     model: str = "accel9"
     """'accel9' (paper 1) or 'accel6' (non-orthogonality held at zero)."""
-    format_version: int = FORMAT_VERSION
 
     # ---- use -------------------------------------------------------------------------------
-    @property
-    def success(self) -> bool:
-        return is_usable(self.status)
-
     @property
     def gains(self) -> np.ndarray:
         return self.params[0:3]
@@ -218,10 +234,6 @@ class AccelCalibration(Record):
         reading (3,), many (N, 3), or a loaded log (:class:`calib_jax.io.SensorLog`: its
         ``acc`` columns)."""
         return apply_params(self.params, _raw_vectors(raw, "accel"))
-
-    def __eq__(self, other) -> bool:
-        """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
-        return _fields_equal(self, other)
 
     # ---- report ----------------------------------------------------------------------------
     def __repr__(self) -> str:
@@ -655,7 +667,7 @@ _field = field  # MagCalibration has an attribute named field
 
 
 @dataclass(frozen=True, eq=False)
-class MagCalibration(Record):
+class MagCalibration(SensorCalibration):
     """Outcome of :func:`calib_jax.calibrate_mag`: y = W (raw - center), |y| = radius.
 
     ``status`` is "ok", "poorly_determined", "not_converged" or "failed" (as for
@@ -699,21 +711,6 @@ class MagCalibration(Record):
     sensor: str = "mag"
     model_selection: dict = _field(default_factory=dict)
     """Per candidate model: BIC and the RMS of |W (x - c)| / radius - 1 in percent."""
-    poorly_determined: list[str] = _field(default_factory=list)
-    warnings: list[str] = _field(default_factory=list)
-    """Problems a user should act on (rows left out, saturation, coverage, plausibility)."""
-    notes: list[str] = _field(default_factory=list)
-    """What the way in found and chose (how the file was read)."""
-    sensor_id: str | None = None
-    date: str = _field(
-        default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-    )
-    source: str | None = None
-    format_version: int = FORMAT_VERSION
-
-    @property
-    def success(self) -> bool:
-        return is_usable(self.status)
 
     def apply(self, raw) -> np.ndarray:
         """Calibrated vectors W (raw - center) for one reading (3,), many (N, 3), or a loaded
@@ -795,10 +792,6 @@ class MagCalibration(Record):
             sensor_id=sensor_id,
             source=source,
         )
-
-    def __eq__(self, other) -> bool:
-        """Field by field; arrays with numpy.array_equal (NaN equal to NaN)."""
-        return _fields_equal(self, other)
 
     def __repr__(self) -> str:
         from .display import mag_repr

@@ -17,7 +17,6 @@ scale, so raw counts, deg/s and rad/s need no unit or initial guess.
 
 from __future__ import annotations
 
-import datetime as _dt
 import functools
 import os
 from dataclasses import dataclass, field
@@ -29,12 +28,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .calibration import (
-    FORMAT_VERSION,
     AccelCalibration,
-    Record,
+    SensorCalibration,
     _check_version,
     _Doc,
-    _fields_equal,
     _raw_vectors,
     _sanitize,
     _unsanitize,
@@ -66,7 +63,7 @@ _SCAN = np.concatenate([np.logspace(-7.0, 2.0, 97), -np.logspace(-7.0, 2.0, 97)]
 
 
 @dataclass(frozen=True, eq=False)
-class GyroCalibration(Record):
+class GyroCalibration(SensorCalibration):
     """Outcome of :func:`calibrate_gyro`: w = C (raw - b) in rad/s.
 
     Errors are the angles (degrees, RMS over the motions) by which the integrated rotation
@@ -128,21 +125,6 @@ class GyroCalibration(Record):
     each (``g_sensitivity``: its F test, the rest spread and the miss before and after)."""
     method: str = "poses"
     """'poses' (imu_tk: gravity carried between static poses) or 'ferraris' (known turns)."""
-    poorly_determined: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
-    sensor_id: str | None = None
-    date: str = field(
-        default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-    )
-    source: str | None = None
-    format_version: int = FORMAT_VERSION
-
-    @property
-    def success(self) -> bool:
-        from .status import is_usable
-
-        return is_usable(self.status)
 
     def apply(self, raw, acc=None) -> np.ndarray:
         """Calibrated rates C x, x = raw - b - G a (times 1 + s sign(x) with scale asymmetry),
@@ -171,9 +153,6 @@ class GyroCalibration(Record):
     def imu_tk(self) -> tuple[np.ndarray, np.ndarray]:
         """imu_tk's (T, K): misalignment with unit diagonal and diagonal scale, C = T K."""
         return to_imu_tk(self.matrix)
-
-    def __eq__(self, other) -> bool:
-        return _fields_equal(self, other)
 
     def __repr__(self) -> str:
         return (
