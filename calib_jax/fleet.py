@@ -117,10 +117,33 @@ def fit_prepared(
             r = calibrate_mag_batch(raw, mask, **options)
         entries = r.entries([str(name) for name, _, _ in fit])
     ref = {"field": options.get("field")} if sensor == "mag" else {}  # accel: each info's g
-    for e, (_, _, info) in zip(entries, fit, strict=True):
+    for e, (_, pts, info) in zip(entries, fit, strict=True):
         if sensor == "accel":
             _judge_accel(e, info, options.get("model") or "accel9")
-        out.append({**e, **info, **ref})
+            out.append({**e, **info, **ref})
+        else:
+            out.append({**e, **info, **ref, **_judge_mag(e, pts, options)})
+    return out
+
+
+def _judge_mag(entry: dict, pts: np.ndarray, options: dict) -> dict:
+    """The single fit's checks on a batch entry (:func:`calib_jax.mag.judge_fit`): the batch
+    called 'ok' a phone's walk with a 14 % radial error that calib-jax mag calls failed, 'do
+    not use'. The status, the warnings and, for a downgraded entry, its message."""
+    from .mag import judge_fit
+    from .status import is_usable
+
+    if not is_usable(entry["status"]):
+        return {}
+    p = np.asarray(entry["params"], float)
+    centre, W = p[:3], p[3:].reshape(3, 3)
+    radius = options.get("field") or float(np.mean(np.linalg.norm((pts - centre) @ W.T, axis=1)))
+    status, warn = judge_fit(
+        pts, centre, W, entry["status"], options.get("model") or "full", radius
+    )
+    out: dict = {"status": status, "warnings": warn}
+    if status != entry["status"]:
+        out["message"] = warn[-1]
     return out
 
 

@@ -522,22 +522,7 @@ def calibrate_mag(
             + "; cover more orientations"
         )
 
-    # coverage on the calibrated sphere (directions from a sphere fit to distorted data
-    # overstate it)
-    y = (xv - centre) @ W.T
-    ny = np.linalg.norm(y, axis=1)
-    if np.all(np.isfinite(y)):
-        y /= ny[:, None]
-        frac, _, unseen = sphere_coverage(y)
-    else:
-        frac, unseen = 0.0, np.full(3, np.nan)
-    del y
-    if frac < 0.5 and status != "failed":
-        warn.append(
-            f"the data cover {100 * frac:.0f} % of the sphere of directions (least seen axis "
-            f"{_vec(unseen)}): the shape is poorly determined there; tumble through more "
-            "orientations"
-        )
+    frac, ny = _calibrated_coverage(xv, centre, W, status, warn)
     r0 = np.linalg.norm(xv - mean, axis=1)
     before = r0 / r0.mean() - 1.0
     nr = np.linalg.norm(xv, axis=1)
@@ -615,6 +600,46 @@ def calibrate_mag(
             cause = warn[-1]  # converged, but the data are not an ellipsoid
         _warnings.warn(f"ellipsoid calibration {status}: {cause}", FitStatusWarning, stacklevel=2)
     return cal
+
+
+def _calibrated_coverage(
+    x: np.ndarray, centre: np.ndarray, W: np.ndarray, status: str, warn: list[str]
+) -> tuple[float, np.ndarray]:
+    """(the share of the sphere of directions the calibrated samples cover, their norms |y|),
+    y = W (x - c); below half, unless the fit failed anyway, a warning in ``warn``. Taken on
+    the calibrated sphere: directions about a sphere fitted to distorted data overstate it."""
+    y = (x - centre) @ W.T
+    ny = np.linalg.norm(y, axis=1)
+    if np.all(np.isfinite(y)):
+        frac, _, unseen = sphere_coverage(y / ny[:, None])
+    else:
+        frac, unseen = 0.0, np.full(3, np.nan)
+    if frac < 0.5 and status != "failed":
+        warn.append(
+            f"the data cover {100 * frac:.0f} % of the sphere of directions (least seen axis "
+            f"{_vec(unseen)}): the shape is poorly determined there; tumble through more "
+            "orientations"
+        )
+    return float(frac), ny
+
+
+def judge_fit(
+    x: np.ndarray, centre: np.ndarray, W: np.ndarray, status: str, model: str, radius: float
+) -> tuple[str, list[str]]:
+    """The single fit's checks on a fit made elsewhere (a batch entry): the coverage of the
+    calibrated sphere and :func:`_plausibility` (a shell no ellipsoid describes, an implausible
+    residual, a non-ellipsoid or extreme semi-axes). Returns the status and the warnings."""
+    warn: list[str] = []
+    _, ny = _calibrated_coverage(x, centre, W, status, warn)
+    r0 = np.linalg.norm(x - x.mean(axis=0), axis=1)
+    after = ny / radius - 1.0
+    rms_after = float(100 * np.sqrt(np.mean(after**2)))
+    semi_axes, _ = ellipsoid_axes(W.T @ W / radius**2)
+    status = _plausibility(
+        status, model, rms_after, lambda: rms_after, r0 / r0.mean() - 1.0, after, semi_axes,
+        "mag", warn,
+    )  # fmt: skip
+    return status, warn
 
 
 def _plausibility(

@@ -1,6 +1,7 @@
 """Fleets of log files: chunked streaming, the batch CLI, a Dask cluster, broken files."""
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -210,6 +211,33 @@ def test_batch_reads_compressed_logs_and_names_what_it_left_out(fleet_dir, tmp_p
     assert "NOTES.md; set --pattern to read them" in printed
     (entry,) = json.loads(out.read_text())["results"]
     assert entry["status"] == "ok" and entry["path"].endswith("imu0.csv.gz")
+
+
+def test_batch_magnetometer_entries_get_the_single_fits_verdict(tmp_path):
+    """A magnetometer whose field changed halfway (radius 1, then 1.4: no ellipsoid through
+    both) and a quarter-sphere tumble: calib-jax batch called both 'ok' with no warning where
+    calibrate_mag calls the first failed and warns of the second's coverage (a phone's walk,
+    Aymdi/DeadReckoning: 'ok' at a 14 % radial error in the batch table, 'failed, do not use'
+    alone). Each entry now has the single fit's status and warnings."""
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(800, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    jump = u * np.where(np.arange(800) < 400, 1.0, 1.4)[:, None] + 0.002 * rng.normal(size=u.shape)
+    cap = u[(u[:, 0] > 0) & (u[:, 1] > 0)] + 0.002 * rng.normal(size=(1, 3))
+    paths = []
+    for name, m in (("jump", jump), ("cap", cap)):
+        paths.append(tmp_path / f"{name}.csv")
+        np.savetxt(paths[-1], 30 * m + 5, delimiter=",", header="mx,my,mz", comments="")
+    entries = list(calibrate_files([str(p) for p in paths], sensor="mag", progress=False))
+    for p, e in zip(paths, entries, strict=True):
+        with warnings.catch_warnings():  # the failed fit's FitStatusWarning: its status says it
+            warnings.simplefilter("ignore", cj.FitStatusWarning)
+            alone = cj.calibrate_mag(str(p), model="full")
+        assert e["status"] == alone.status, (p.name, e["status"], alone.status)
+        cover = [w for w in alone.warnings if w.startswith("the data cover")]
+        assert [w for w in e["warnings"] if w.startswith("the data cover")] == cover
+    assert entries[0]["status"] == "failed" and "no ellipsoid describes" in entries[0]["message"]
+    assert entries[1]["status"] != "failed" and entries[1]["warnings"]
 
 
 def test_batch_cli_bad_directory(tmp_path, capsys):
