@@ -865,9 +865,9 @@ def detect_static(
         ``min_samples`` is dropped). Default: half a window, and the ramps at the ends of the
         runs cut off (module docstring); an explicit trim fixes the edges.
     pose_table : bool, optional
-        True: every row is a pose; False: never; default: recognised when there is no sample
-        rate, no explicit window, threshold or minimum length, few rows and neighbouring rows
-        far apart.
+        True: every row is a pose; False: never; default: recognised when there is no explicit
+        window, threshold or minimum length, few rows and neighbouring rows far apart (with or
+        without a sample rate).
     block : int, optional
         The log was recorded pose by pose in blocks of this many samples (CK-Explorer's 160
         poses x 100): the blocks are the intervals (those with a sample not ``valid`` are left
@@ -927,15 +927,12 @@ def detect_static(
         )
 
     # a window or a fixed threshold says the rows are a time series; a factor alone does not
-    # (the CLI passes one by default)
+    # (the CLI passes one by default), nor does a sample rate: rows that each lie far from
+    # their neighbours on one ellipsoid are poses however often they came (a 24-pose table
+    # given --sample-rate 10 was searched for still runs and refused as 'only 3 poses')
     explicit = window is not None or threshold is not None
     if pose_table is None:
-        pose_table = (
-            not sample_rate
-            and not explicit
-            and min_samples is None
-            and looks_like_pose_table(x[valid])
-        )
+        pose_table = not explicit and min_samples is None and looks_like_pose_table(x[valid])
     if pose_table:
         return _pose_table_report(x, valid)
 

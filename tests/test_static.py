@@ -141,9 +141,11 @@ def test_pose_table_is_fitted_directly(tol):
     assert np.all(np.abs(z) < tol.N_SIGMA), z
     # a time series is never a pose table (neighbouring samples sit at the noise level)
     assert not looks_like_pose_table(posed_log(1.0, 1.0, 100.0, 2e-3, poses=20).raw)
-    # a table with a sample rate, or an explicit window, is read as a time series; a factor
-    # alone (the CLI passes one) does not say so
-    assert detect_static(table, sample_rate=100.0).kind == "log"
+    # a table with an explicit window is read as a time series; a factor alone (the CLI passes
+    # one) does not say so, nor does a sample rate: a 24-pose table (furbrain/CircuitPython_
+    # mag_cal) given --sample-rate 10 was searched for still runs and refused as 'only 3 poses'
+    assert detect_static(table, sample_rate=100.0).kind == "pose_table"
+    np.testing.assert_array_equal(cj.calibrate_accel(table, sample_rate=10.0).params, cal.params)
     assert detect_static(table, window=5).kind == "log"
     assert detect_static(table, threshold_factor=6.0).kind == "pose_table"
 
