@@ -379,6 +379,12 @@ def _angles_deg(a: np.ndarray, m: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.sum(a * m, axis=1), -1.0, 1.0)))
 
 
+MIN_SAMPLES = 12
+"""Samples the rotation needs at the least: three angles and the dip from the angle between
+gravity and the field, with room to see the residual (a 24-pose table is enough; 50 refused
+it)."""
+
+
 def align_mag_to_accel(
     acc: np.ndarray,
     mag: np.ndarray,
@@ -421,11 +427,17 @@ def align_mag_to_accel(
     ok &= np.abs(na / np.median(na[ok]) - 1.0) < static_tol
     ok &= np.abs(nm / np.median(nm[ok]) - 1.0) < static_tol
     warn = []
-    if ok.sum() < 50:
+    if ok.sum() < MIN_SAMPLES:
+        n_finite = int(np.sum(np.isfinite(na) & np.isfinite(nm)))
         raise ValueError(
             f"only {int(ok.sum())} samples have |a| and |m| within {100 * static_tol:.0f} % of "
-            "their medians; record slower motion (in Python, align_mag_to_accel's static_tol "
-            "widens the band)"
+            f"their medians (of {n_finite} finite samples; the rotation needs {MIN_SAMPLES}); "
+            + (
+                "record more orientations"
+                if n_finite < MIN_SAMPLES
+                else "record slower motion (in Python, align_mag_to_accel's static_tol widens "
+                "the band)"
+            )
         )
     a = acc[ok] / na[ok, None]
     m = mag[ok] / nm[ok, None]

@@ -1,12 +1,14 @@
 """Regression on real measured logs in ../shared/data (each folder's NOTES.md says what it is)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import calib_jax as cj
 from calib_jax.cli import demo_log_path, main
+from calib_jax.marg import calibrate_marg_log
 
 from .conftest import shared_file
 
@@ -145,3 +147,30 @@ def test_accelerometer_one_answer_on_every_path(xsens, tmp_path):
     close(cli.params, cli.stderr, "calib-jax accel")
     [dev] = calibrate_devices([log], "accel", echo=None)
     close(dev["accel"]["params"], dev["accel"]["stderr"], "record, several logs")
+
+
+def test_sap6_pose_table_reproduces_the_devices_calibration():
+    """A real 24-shot pose table of a cave-survey instrument with the instrument's own
+    calibration of the same shots (tests/data/sap6/NOTES.md): ``calibrate_marg_log`` with no
+    options reads it as a pose table (it was refused: 'only 24 samples ... record slower
+    motion', a minimum of 50 samples for the rotation) and reproduces the device's
+    accelerometer and magnetometer offsets, the signed permutation between the two sensors'
+    axes that its config states, and its dip.
+
+    Tolerances: both calibrations fit an ellipsoid to the same 24 points, so the offsets agree
+    to the config's six printed digits (1e-5 of m/s^2 and 1e-4 of uT here; seen 4e-6 and
+    5e-5), far inside one standard error (0.01-0.04). The dip: the device reports the mean of
+    its per-shot dips, we fit one dip to all shots; within 0.5 deg (seen 0.24 deg, the sign is
+    the hemisphere convention, which the permutation with det +1 sets)."""
+    here = Path(__file__).parent / "data" / "sap6"
+    cfg = json.loads((here / "HC.cfg").read_text())["calib"]
+    rec = calibrate_marg_log(str(here / "HC.csv"))
+    assert rec.status == "ok" and rec.n_used == 24
+    assert any("pose table: 24 rows" in n for n in rec.accel.notes)
+    # the device frame is accel (-y, -x, +z) and mag (+x, +y, -z): in the accelerometer's own
+    # axes its gravity centre is (-c1, -c0, c2) and the magnetometer's (c0, c1, -c2)
+    gc, mc = np.array(cfg["grav"]["centre"]), np.array(cfg["mag"]["centre"])
+    np.testing.assert_allclose(rec.accel.params[6:], [-gc[1], -gc[0], gc[2]], atol=1e-5)
+    np.testing.assert_allclose(rec.mag.center, [mc[0], mc[1], -mc[2]], atol=1e-4)
+    assert rec.permutation == "x <- -y, y <- -x, z <- -z"
+    assert abs(abs(rec.dip_deg) - cfg["dip_avg"]) < 0.5
