@@ -973,6 +973,17 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
 
     # rests: bias and noise (for the clipping test)
     iv = gyro_still_intervals(g, iv, mag, rate)
+    moving = _moving_rests(g, iv)
+    if moving.any():
+        notes.append(
+            f"{int(moving.sum())} of {len(iv)} static poses left out as rests: the gyro turned "
+            f"or shook during them (a mean rate or a scatter more than {MOVING_REST:g}x the "
+            "rests' typical scatter away from the others), motion the accelerometer did not "
+            "see: "
+            + ", ".join(f"[{s}, {e})" for s, e in iv[moving][:6])
+            + (", ..." if moving.sum() > 6 else "")
+        )
+        iv = iv[~moving]
     rest = np.concatenate([g[s:e] for s, e in iv])
     bias = rest.mean(axis=0)
     noise_raw = _rest_noise(g, iv)
@@ -1029,6 +1040,28 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         acc, g, dt, rate, accel, iv, windows, dirs, pose_out, notes, warn, source,
         bias, noise_raw, len(rest), temp,
     )  # fmt: skip
+
+
+MOVING_REST = 10.0
+"""A rest whose mean rate lies further than this many times the rests' median scatter from
+the rests' median rate, or whose own scatter is this many times the median, moved: a hand-held
+board's fast turn that the accelerometer's detector took for a pose (MPU-6050 log of
+tomisuarez2/ImuCalibration: 55 deg/s in a 'rest'). A sensor's bias moves by a fraction of its
+per-sample noise between poses, so a clean log loses none."""
+
+
+def _moving_rests(g: np.ndarray, intervals: np.ndarray) -> np.ndarray:
+    """(n_intervals,) True for the rests that moved (:data:`MOVING_REST`); none with fewer
+    than 4 rests (no majority to judge by)."""
+    if len(intervals) < 4:
+        return np.zeros(len(intervals), bool)
+    means = np.array([g[s:e].mean(axis=0) for s, e in intervals])
+    scatter = np.array([g[s:e].std(axis=0) for s, e in intervals])
+    typical = np.maximum(np.median(scatter, axis=0), np.finfo(float).tiny)
+    off = np.abs(means - np.median(means, axis=0))
+    return np.any(off > MOVING_REST * typical, axis=1) | np.any(
+        scatter > MOVING_REST * typical, axis=1
+    )
 
 
 def _rest_noise(g: np.ndarray, intervals) -> np.ndarray:
