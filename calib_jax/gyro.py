@@ -48,6 +48,7 @@ from .models.gyro import (
 )
 from .padding import bucket
 from .runtime import disk_jit
+from .static import looks_like_pose_table
 
 UNIT_SCALES = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
 """rad/s per unit of the readings a gyroscope may log (counts have no nominal scale)."""
@@ -913,6 +914,13 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             gyro = SensorLog(acc=None, gyro=np.asarray(gyro, float), t=data.t)
         data = join_gyro(data, gyro)
     if isinstance(data, SensorLog):
+        if data.acc is None and data.gyro is not None:
+            raise ValueError(
+                f"{data.path or 'the log'} holds the gyro but no accelerometer, and the fit "
+                "needs gravity's direction at each pose: give the accelerometer's file first "
+                "(calib-jax gyro ACC_FILE GYRO_FILE; calibrate_gyro(acc_log, gyro_log) in "
+                "Python), or map its columns with --columns if this file has them"
+            )
         acc, g = data.vectors("accel"), data.vectors("gyro")
         mag = None if data.mag is None else np.asarray(data.mag, float)
         temp = data.temp
@@ -946,6 +954,13 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         acc, g, t = acc[rows], g[rows], np.asarray(t, float)[rows]
         mag = None if mag is None else mag[rows]
         temp = None if temp is None else np.asarray(temp, float)[rows]
+    if looks_like_pose_table(acc):
+        raise ValueError(
+            f"the {len(acc)} rows look like a pose table (one averaged row per pose, each far "
+            "from the next): the gyro fit integrates the turns between poses, and a pose "
+            "table holds none. Give the log the table was made from (every sample, with a "
+            "time column or --sample-rate)"
+        )
     dt, rate = _time_steps(t, sample_rate, len(g), notes)
     _check_turn_axes(g)
     if accel is None:

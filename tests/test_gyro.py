@@ -338,6 +338,20 @@ def test_rows_without_readings_are_spanned_by_the_time_column(sim):
         calibrate_gyro(sim.acc, sim.gyro, t=np.full(len(sim.t), np.nan))
 
 
+def test_pose_tables_and_gyro_only_files_say_what_the_gyro_fit_needs(sim, tmp_path):
+    """A pose table (one row per pose) asked for --sample-rate and then 'only 3 distinct
+    poses'; a phone's Gyroscope.csv alone was told to map accelerometer columns with
+    --columns (Aymdi/DeadReckoning). Each now says what is missing and what to give."""
+    starts = [np.flatnonzero(sim.pose == k)[0] for k in range(12)]
+    table = np.hstack([sim.acc[starts], sim.gyro[starts]])
+    with pytest.raises(ValueError, match="12 rows look like a pose table.*holds none"):
+        calibrate_gyro(table[:, :3], table[:, 3:], sample_rate=1.0)
+    f = tmp_path / "Gyroscope.csv"
+    np.savetxt(f, np.column_stack([sim.t, sim.gyro]), delimiter=",", header="t,gx,gy,gz")
+    with pytest.raises(ValueError, match="no accelerometer.*calib-jax gyro ACC_FILE GYRO_FILE"):
+        calibrate_gyro(str(f))
+
+
 def test_a_rest_the_gyro_saw_turn_is_left_out(sim):
     """A turn about gravity during a pose (a hand-held board turned at 0.5 rad/s for the
     pose's 2 s): the accelerometer stays still and its detector keeps the pose, which was

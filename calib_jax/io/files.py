@@ -220,8 +220,12 @@ class SensorLog:
         x = {"accel": self.acc, "gyro": self.gyro, "mag": self.mag}[sensor]
         if x is None:
             cols = {"accel": "ax, ay, az", "gyro": "gx, gy, gz", "mag": "mx, my, mz"}[sensor]
+            have = [n for n, a in (("accel", self.acc), ("gyro", self.gyro), ("mag", self.mag))
+                    if a is not None]  # fmt: skip
             raise ValueError(
-                f"{self.path}: the log has no {sensor} columns ({cols}); map them with --columns"
+                f"{self.path}: the log has no {sensor} columns ({cols})"
+                + (f"; it holds {' and '.join(have)} columns only" if have else "")
+                + "; map them with --columns if they are there under other names"
             )
         return np.asarray(x, float)
 
