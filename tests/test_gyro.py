@@ -242,10 +242,18 @@ def test_cli_takes_the_two_xsens_files_and_apply_corrects_the_gyro(tmp_path, cap
     argv = ["gyro", str(demo_log_path()), str(gyro_demo_log_path()), "--columns", cols]
     assert main([*argv, "--json", str(mapped)]) == 0
     np.testing.assert_array_equal(GyroCalibration.load(mapped).matrix, saved.matrix)
+    # a gyro file 10 rows short, on the same clock: joined by its time column, the
+    # accelerometer's last rows left out; one of another recording (its times 1000 s later)
+    # is refused, naming both files
+    rows = gyro_demo_log_path().read_text().splitlines()
     short = tmp_path / "short_gyro.txt"
-    short.write_text("\n".join(gyro_demo_log_path().read_text().splitlines()[:-10]) + "\n")
-    with pytest.raises(ValueError, match="rows and .*short_gyro.txt.*one clock"):
-        calibrate_gyro(demo_log_path(), short)
+    short.write_text("\n".join(rows[:-10]) + "\n")
+    cut = calibrate_gyro(demo_log_path(), short)
+    assert any("10 accelerometer rows outside the gyro's time span" in n for n in cut.notes)
+    later = tmp_path / "later_gyro.txt"
+    later.write_text("".join(f"{float(r.split()[0]) + 1e3} {r.split(None, 1)[1]}\n" for r in rows))
+    with pytest.raises(ValueError, match="xsens_acc.*later_gyro.txt.*overlap.*one clock"):
+        calibrate_gyro(demo_log_path(), later)
 
 
 def test_cli_without_gyro_columns_says_how_to_give_them(capsys):
@@ -350,6 +358,31 @@ def test_pose_tables_and_gyro_only_files_say_what_the_gyro_fit_needs(sim, tmp_pa
     np.savetxt(f, np.column_stack([sim.t, sim.gyro]), delimiter=",", header="t,gx,gy,gz")
     with pytest.raises(ValueError, match="no accelerometer.*calib-jax gyro ACC_FILE GYRO_FILE"):
         calibrate_gyro(str(f))
+
+
+def test_two_files_with_clocks_of_their_own_are_joined_by_time(sim, tmp_path):
+    """A phone writes Accelerometer.csv and Gyroscope.csv each with its own times and row
+    count (Aymdi/DeadReckoning: 10,577 and 10,575 rows), which was refused ('must share one
+    clock'). The gyro is interpolated onto the accelerometer's times; here its stamps are
+    half a sample later and its first 3 rows missing, so the accelerometer's first rows
+    (a rest) fall outside its span and are left out. The fit equals the one-clock fit within
+    1 standard error (a 5 ms shift of whole motions between rests changes no integral)."""
+    fa, fg = tmp_path / "Accelerometer.csv", tmp_path / "Gyroscope.csv"
+    np.savetxt(fa, np.column_stack([sim.t, sim.acc]), delimiter=",", header="t,ax,ay,az",
+               comments="")  # fmt: skip
+    np.savetxt(fg, np.column_stack([sim.t + 0.005, sim.gyro])[3:], delimiter=",",
+               header="t,gx,gy,gz", comments="")  # fmt: skip
+    cal = calibrate_gyro(str(fa), str(fg))
+    ref = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    said = f"({len(sim.t) - 3} rows) interpolated linearly onto the accelerometer's"
+    assert any(said in n and "4 accelerometer rows outside" in n for n in cal.notes), cal.notes
+    assert np.all(np.abs((cal.matrix - ref.matrix) / ref.stderr_matrix) < 1.0)
+    assert np.all(np.abs((cal.bias - ref.bias) / ref.stderr_bias) < 1.0)
+    short = tmp_path / "short.csv"  # a gyro file of another recording: refused by its times
+    np.savetxt(short, np.column_stack([sim.t[:100] + 1e3, sim.gyro[:100]]), delimiter=",",
+               header="t,gx,gy,gz", comments="")  # fmt: skip
+    with pytest.raises(ValueError, match="overlap in less than half"):
+        calibrate_gyro(str(fa), str(short))
 
 
 def test_a_rest_the_gyro_saw_turn_is_left_out(sim):
