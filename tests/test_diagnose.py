@@ -424,6 +424,22 @@ def test_a_base_fit_that_does_not_converge_gives_no_verdict(monkeypatch):
     assert "the base model's fit did not converge" in d.notes[0]
 
 
+def test_a_magnetometer_fit_that_failed_says_why():
+    """A phone's walk (Aymdi/DeadReckoning): 'not possible: the declared model's fit is
+    failed (converged ...); record more orientations', though no model was declared and the
+    fit failed because no ellipsoid describes the data. It now names the model calib-jax mag
+    chose and gives that fit's own reason. Here a field that changes halfway (radius 1, then
+    1.4)."""
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(800, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    m = 30 * u * np.where(np.arange(800) < 400, 1.0, 1.4)[:, None] + 5
+    d = diagnose_mag(m + 0.05 * rng.normal(size=m.shape), sample_rate=50.0)
+    assert d.verdict == "not_possible"
+    assert "calib-jax mag's choice) is 'failed'" in d.notes[0]
+    assert "no ellipsoid describes the data" in d.notes[0]
+
+
 def test_the_declared_magnetometer_model_is_calib_jax_mags_choice():
     """diagnose_mag declared the full ellipsoid whatever the log: on a CMU ALFA flight that
     `calib-jax mag` fitted with a sphere (full 'not determined') the diagnosis fitted the full

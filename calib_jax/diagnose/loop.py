@@ -1181,8 +1181,13 @@ def diagnose_mag(
     keep = np.flatnonzero(ok)[::k]
     if len(keep) < MIN_OBSERVATIONS:
         return _not_possible(
-            "mag", len(keep), f"{MIN_OBSERVATIONS} samples", "too few samples", source
+            "mag",
+            len(keep),
+            f"{MIN_OBSERVATIONS} samples",
+            f"too few samples ({len(keep)} finite, unsaturated ones)",
+            source,
         )
+    declared = "declared" if model != "auto" else "calib-jax mag's choice"
     cal = calibrate_mag(x[ok], model=model)
     chose = []
     if model == "auto":  # calib-jax mag's choice (the ROS flight's full ellipsoid was 'not
@@ -1197,8 +1202,12 @@ def diagnose_mag(
             "mag",
             len(keep),
             "a converged ellipsoid fit",
-            f"the declared model's fit is '{cal.status}' ({cal.solver_message}); record more "
-            "orientations",
+            f"the ellipsoid fit (model {cal.model}, {declared}) is '{cal.status}': "
+            + (
+                cal.warnings[-1]
+                if cal.warnings
+                else f"{cal.solver_message}; record more orientations"
+            ),
             source,
         )
     W, c, R = np.asarray(cal.soft_iron), np.asarray(cal.center), float(cal.radius)
