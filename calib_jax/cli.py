@@ -463,7 +463,10 @@ def run_marg(args: argparse.Namespace) -> int:
 
     # sensor="mag": a headerless 6-column file is accelerometer then magnetometer, as calib-jax
     # mag reads it (it was read as accelerometer + gyro, and marg then asked for mx, my, mz)
-    log = load_args(args, sensor="mag")
+    if args.mag_file is None:
+        log = load_args(args, sensor="mag")
+    else:  # a phone's Accelerometer.csv and Magnetometer.csv
+        log = _two_files(args, args.mag_file, "mag")
     if args.accel in ("ellipsoid", "none") and (
         detector_options(args, log.sample_rate) or args.block is not None
     ):
@@ -478,7 +481,7 @@ def run_marg(args: argparse.Namespace) -> int:
         sensor_id=args.sensor_id,
         **(_accel_detector(args, log.sample_rate) if args.accel in ("auto", "static") else {}),
     )
-    print(f"calib-jax marg: {args.file}")
+    print(f"calib-jax marg: {args.file}" + (f" + {args.mag_file}" if args.mag_file else ""))
     print(rec.report())
     _json_out(rec, args.json)
     if args.plot:
@@ -507,22 +510,35 @@ def _print_batch_results(results: list[dict], sensor: str) -> None:
         print(f"({more}standard errors: write them with --json OUT.json or --table OUT.csv)")
 
 
-def _split_gyro_columns(spec: str | None) -> tuple[dict | None, dict | None]:
-    """--columns for ``calib-jax gyro ACC_FILE GYRO_FILE``: the gyro's entries (gx, gy, gz)
-    name columns of the gyro's file, with t where given; the rest the accelerometer's."""
+def _split_columns(spec: str | None, prefix: str) -> tuple[dict | None, dict | None]:
+    """--columns for two files (``calib-jax gyro ACC_FILE GYRO_FILE``, ``calib-jax marg
+    ACC_FILE MAG_FILE``): the second sensor's entries (``prefix`` g or m: gx, gy, gz) name
+    columns of its own file, with t where given; the rest the accelerometer's."""
     from .io.files import parse_columns
 
     mapping = parse_columns(spec)
-    if not mapping or not any(k.startswith("g") for k in mapping):
+    if not mapping or not any(k.startswith(prefix) for k in mapping):
         return mapping, None
-    gyro = {k: v for k, v in mapping.items() if k.startswith("g") or k == "t"}
-    return {k: v for k, v in mapping.items() if not k.startswith("g")}, gyro
+    other = {k: v for k, v in mapping.items() if k.startswith(prefix) or k == "t"}
+    return {k: v for k, v in mapping.items() if not k.startswith(prefix)}, other
+
+
+def _two_files(args: argparse.Namespace, second: str, sensor: str):
+    """The accelerometer's log of ``args.file`` joined with ``sensor``'s own file ``second``
+    (:func:`calib_jax.io.files.join_logs`: row by row, or by their time columns)."""
+    from .io.files import join_logs
+
+    acc_columns, own = _split_columns(args.columns, sensor[0])
+    log = load_args(args, sensor="accel", columns=acc_columns)
+    other = load_input(  # its own columns only (None: its header or the guess)
+        second, columns=own, sample_rate=args.sample_rate, sensor=sensor, instance=args.instance
+    )
+    return join_logs(log, other, sensor)
 
 
 def run_gyro(args: argparse.Namespace) -> int:
     _enable_x64()
     from .gyro import calibrate_gyro
-    from .io.files import join_gyro
 
     if args.gyro_file is None:
         log = load_args(args)
@@ -533,16 +549,7 @@ def run_gyro(args: argparse.Namespace) -> int:
                 "(calib-jax gyro ACC_FILE GYRO_FILE)"
             )
     else:
-        acc_columns, gyro_columns = _split_gyro_columns(args.columns)
-        log = load_args(args, sensor="accel", columns=acc_columns)
-        glog = load_input(  # its own columns only (None: its header or the guess)
-            args.gyro_file,
-            columns=gyro_columns,
-            sample_rate=args.sample_rate,
-            sensor="gyro",
-            instance=args.instance,
-        )
-        log = join_gyro(log, glog)
+        log = _two_files(args, args.gyro_file, "gyro")
     cal = calibrate_gyro(
         log,
         units=args.gyro_units,
@@ -685,7 +692,14 @@ def build_parser() -> argparse.ArgumentParser:
         "uses the accelerometer as given (already calibrated, like the CK-Explorer demo log).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    g.add_argument("file")
+    g.add_argument("file", help="log with accelerometer and magnetometer columns")
+    g.add_argument(
+        "mag_file",
+        nargs="?",
+        default=None,
+        help="the magnetometer's own file, when it is apart from the accelerometer's (same "
+        "rows, or each with a time column: joined by time)",
+    )
     g.add_argument(
         "--accel",
         default="auto",
@@ -723,7 +737,12 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     gy.add_argument("file", help="log with accelerometer and gyro columns (or accelerometer only)")
-    gy.add_argument("gyro_file", nargs="?", default=None, help="the gyro's file, same rows")
+    gy.add_argument(
+        "gyro_file",
+        nargs="?",
+        default=None,
+        help="the gyro's own file (same rows, or each with a time column: joined by time)",
+    )
     gy.add_argument(
         "--gyro-units",
         default="auto",

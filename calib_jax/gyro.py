@@ -37,7 +37,7 @@ from .calibration import (
     _unsanitize,
     linear_forms,
 )
-from .io.files import SensorLog, as_log, join_gyro
+from .io.files import SensorLog, as_log, join_logs
 from .lm import fit_status, lm_solve, status_message
 from .models.gyro import (
     Motions,
@@ -912,7 +912,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         gyro = as_log(gyro, "gyro")
         if not isinstance(gyro, SensorLog):
             gyro = SensorLog(acc=None, gyro=np.asarray(gyro, float), t=data.t)
-        data = join_gyro(data, gyro)
+        data = join_logs(data, gyro)
     if isinstance(data, SensorLog):
         if data.acc is None and data.gyro is not None:
             raise ValueError(

@@ -240,6 +240,33 @@ def test_marg_on_the_ckexplorer_tumble(tmp_path, capsys):
         MARGRecord.from_dict(d["mag"])
 
 
+def test_marg_takes_the_magnetometers_own_file(tmp_path, capsys):
+    """A phone writes Accelerometer.csv and Magnetometer.csv apart, each with its own times
+    and row count; marg took one file only. The CK-Explorer tumble split into two files, the
+    magnetometer's 5 rows short: calib-jax marg ACC MAG equals calib-jax marg on the one
+    file cut to the common rows (np.interp at the file's own times returns its samples, so
+    the data are identical: 1e-9 relative is round-off between two runs of one fit)."""
+    data = np.loadtxt(mag_demo_log_path(), delimiter=",", skiprows=1)
+    t = np.arange(len(data)) / 100.0
+    acc, mag, one = (
+        tmp_path / "Accelerometer.csv",
+        tmp_path / "Magnetometer.csv",
+        tmp_path / "one.csv",
+    )
+    kw = dict(delimiter=",", comments="")
+    np.savetxt(acc, np.column_stack([t, data[:, :3]]), header="t,ax,ay,az", **kw)
+    np.savetxt(mag, np.column_stack([t, data[:, 3:]])[:-5], header="t,mx,my,mz", **kw)
+    np.savetxt(one, np.column_stack([t, data])[:-5], header="t,ax,ay,az,mx,my,mz", **kw)
+    assert main(["marg", str(acc), str(mag), "--json", str(tmp_path / "two.json")]) == 0
+    assert "+ " + str(mag) in capsys.readouterr().out
+    assert main(["marg", str(one), "--json", str(tmp_path / "one.json")]) == 0
+    two, ref = (MARGRecord.load(tmp_path / f"{k}.json") for k in ("two", "one"))
+    np.testing.assert_allclose(two.R_mag_to_acc, ref.R_mag_to_acc, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(two.mag.center, ref.mag.center, rtol=1e-9)
+    assert two.dip_deg == pytest.approx(ref.dip_deg, rel=1e-9)
+    assert any("5 accelerometer rows outside the mag's time span" in n for n in two.mag.notes)
+
+
 def test_marg_on_a_flat_log_says_why_in_one_error(tmp_path, capsys):
     """A board that never tilts (gravity along +z, the magnetometer noise around a constant):
     exit 2 with one error that names the unobservable rotation and the failed magnetometer fit,

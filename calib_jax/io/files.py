@@ -1185,29 +1185,31 @@ def as_log(data, sensor: str | None = None):
     return data
 
 
-def join_gyro(log: SensorLog, gyro_log: SensorLog) -> SensorLog:
-    """The accelerometer's log with the gyro readings of another file of the same recording
-    (imu_tk's two-file layout, a phone's Accelerometer.csv and Gyroscope.csv). Files that
-    share one clock row by row (the same number of rows and, where both have one, the same
-    time column) are joined as they are. Files with time columns of their own (a phone writes
-    each sensor when it has a sample) get the gyro interpolated linearly onto the
-    accelerometer's times, and the accelerometer's rows outside the gyro's time span are left
-    out, with a note. A ValueError names both files when neither works. The logs given are
-    left as they are (a new SensorLog is returned)."""
-    a, g = log.path or "the accelerometer's log", gyro_log.path or "the gyro's log"
-    why = "the gyro fit needs both sensors sample by sample on one clock"
-    same_rows = len(log) == len(gyro_log)
-    if same_rows and (log.t is None or gyro_log.t is None or np.allclose(log.t, gyro_log.t)):
-        return dataclasses.replace(log, gyro=gyro_log.vectors("gyro"))
-    if log.t is None or gyro_log.t is None:
-        raise ValueError(f"{a} has {len(log)} rows and {g} {len(gyro_log)}: {why}")
-    ta, tg = np.asarray(log.t, float), np.asarray(gyro_log.t, float)
-    steps_ok = all(np.all(np.diff(t[np.isfinite(t)]) > 0) for t in (ta, tg))
-    inside = (ta >= np.nanmin(tg)) & (ta <= np.nanmax(tg)) if steps_ok else ta < -np.inf
+def join_logs(log: SensorLog, other: SensorLog, sensor: str = "gyro") -> SensorLog:
+    """The accelerometer's log with the ``sensor`` ("gyro" or "mag") readings of another file
+    of the same recording (imu_tk's two-file layout, a phone's Accelerometer.csv beside its
+    Gyroscope.csv or Magnetometer.csv). Files that share one clock row by row (the same number
+    of rows and, where both have one, the same time column) are joined as they are. Files with
+    time columns of their own (a phone writes each sensor when it has a sample) get the other
+    sensor interpolated linearly onto the accelerometer's times, and the accelerometer's rows
+    outside the other file's time span are left out, with a note. A ValueError names both
+    files when neither works. The logs given are left as they are (a new SensorLog is
+    returned)."""
+    a, o = log.path or "the accelerometer's log", other.path or f"the {sensor}'s log"
+    why = f"the fit needs the accelerometer and the {sensor} sample by sample on one clock"
+    field_name = {"gyro": "gyro", "mag": "mag"}[sensor]
+    same_rows = len(log) == len(other)
+    if same_rows and (log.t is None or other.t is None or np.allclose(log.t, other.t)):
+        return dataclasses.replace(log, **{field_name: other.vectors(sensor)})
+    if log.t is None or other.t is None:
+        raise ValueError(f"{a} has {len(log)} rows and {o} {len(other)}: {why}")
+    ta, to = np.asarray(log.t, float), np.asarray(other.t, float)
+    steps_ok = all(np.all(np.diff(t[np.isfinite(t)]) > 0) for t in (ta, to))
+    inside = (ta >= np.nanmin(to)) & (ta <= np.nanmax(to)) if steps_ok else ta < -np.inf
     if not steps_ok or inside.sum() < 0.5 * len(ta):
         raise ValueError(
-            f"{a} ({len(log)} rows, t {np.nanmin(ta):.6g}-{np.nanmax(ta):.6g} s) and {g} "
-            f"({len(gyro_log)} rows, t {np.nanmin(tg):.6g}-{np.nanmax(tg):.6g} s) "
+            f"{a} ({len(log)} rows, t {np.nanmin(ta):.6g}-{np.nanmax(ta):.6g} s) and {o} "
+            f"({len(other)} rows, t {np.nanmin(to):.6g}-{np.nanmax(to):.6g} s) "
             + (
                 "have time columns that do not both increase"
                 if not steps_ok
@@ -1215,19 +1217,22 @@ def join_gyro(log: SensorLog, gyro_log: SensorLog) -> SensorLog:
             )
             + f": {why}"
         )
-    gv, ok = gyro_log.vectors("gyro"), np.isfinite(tg)
-    gyro = np.column_stack([np.interp(ta[inside], tg[ok], gv[ok, k]) for k in range(3)])
+    v, ok = other.vectors(sensor), np.isfinite(to)
+    joined = np.column_stack([np.interp(ta[inside], to[ok], v[ok, k]) for k in range(3)])
     keep = {
-        name: None if (v := getattr(log, name)) is None else np.asarray(v)[inside]
-        for name in ("acc", "mag", "temp", "t")
+        name: None if (x := getattr(log, name)) is None else np.asarray(x)[inside]
+        for name in ("acc", "gyro", "mag", "temp", "t")
+        if name != field_name
     }
     note = (
-        f"the gyro of {g} ({len(gyro_log)} rows) interpolated linearly onto the "
+        f"the {sensor} of {o} ({len(other)} rows) interpolated linearly onto the "
         f"accelerometer's {int(inside.sum())} times"
-        + (f"; {int((~inside).sum())} accelerometer rows outside the gyro's time span left out"
-           if not inside.all() else "")
+        + (f"; {int((~inside).sum())} accelerometer rows outside the {sensor}'s time span left "
+           "out" if not inside.all() else "")
     )  # fmt: skip
-    return dataclasses.replace(log, **keep, gyro=gyro, notes=[*log.notes, note], layout=None)
+    return dataclasses.replace(
+        log, **keep, **{field_name: joined}, notes=[*log.notes, note], layout=None
+    )
 
 
 def _assemble(
