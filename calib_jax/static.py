@@ -61,6 +61,7 @@ moving variance and every interval's mean in O(N).
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -253,7 +254,7 @@ class StaticReport:
             "given": "as given",
             "most_poses": (
                 f"none of {len(self.candidates)} candidates found {MIN_POSES} distinct poses to "
-                "score; kept the one that found the most"
+                "score; kept one that found the count most settings found"
             ),
         }[self.how]
         stride = f", on every {self.stride}th sample" if self.stride > 1 else ""
@@ -1012,9 +1013,12 @@ def detect_static(
             covered.append(int(np.sum(b - a)))
 
     best = _choose(candidates, covered)
-    few = None  # nothing scorable, but some setting found several poses: keep the one with most
-    if best is None and not single and max((c.n_poses for c in candidates), default=0) >= 2:
-        most = max(c.n_poses for c in candidates)
+    few = None  # nothing scorable, but settings found several poses: the count most settings
+    # agree on (ties: the larger). Not the most any found: the loosest threshold lets a turn in
+    # as one pose more (a hand-held MPU-6050 log: 11 poses at 150x the noise, 10 at the rest)
+    counts = Counter(c.n_poses for c in candidates if c.n_poses >= 2)
+    if best is None and not single and counts:
+        most = max(counts, key=lambda k: (counts[k], k))
 
         def rank(i: int):
             c = candidates[i]
