@@ -316,8 +316,10 @@ def check_poses(
     # unsigned counts): points of a single pose fit no sphere, and about their own arbitrary
     # centre the noise looked like several poses (a board lying flat gave "5 distinct poses")
     nominal_centre = nominal_centre_of(obs)
-    n_fitted, n_nominal = distinct_directions(pts, c_s), distinct_directions(pts, nominal_centre)
-    n_distinct = max(1, min(n_fitted, n_nominal))
+    n_fitted, n_nominal = (
+        max(1, distinct_directions(pts, c)) for c in (c_s, nominal_centre)
+    )  # one point about its own centre has no direction: still one pose
+    n_distinct = min(n_fitted, n_nominal)
     about = ""
     if n_fitted != n_nominal:  # say which count this is: the detector's counts are the other
         about = (

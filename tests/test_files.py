@@ -434,6 +434,19 @@ def test_uneven_timestamps_give_the_mean_rate_with_a_note(tmp_path):
     assert plain.sample_rate == pytest.approx(100.0) and not any("uneven" in m for m in plain.notes)
 
 
+def test_a_rate_among_settings_in_a_comment_line(tmp_path):
+    """PicoQuake's export (plab-io/picoquake, GPL-3) states its rate among other settings:
+    '# Config: data_rate = 2000.0 Hz, filter = 488 Hz, ...'. It was not read: the gyro asked
+    for --sample-rate and the accelerometer's detector ran without a rate. Other numbers in Hz
+    on such a line (the filter) are not the rate."""
+    head = "# PLab PicoQuake Data\n# Config: data_rate = 2000.0 Hz, filter = 488 Hz, "
+    head += "acc_range = 4 g\ncount,a_x,a_y,a_z\n"
+    log = load_log(_write(tmp_path, head + _table(ROWS[:, :4])))
+    assert log.sample_rate == 2000.0
+    other = "# filter = 488 Hz\nt_s,ax,ay,az\n" + _table(ROWS[:, :4])
+    assert load_log(_write(tmp_path, other, "b.csv")).sample_rate == pytest.approx(100.0)
+
+
 def test_vendor_exports_read_without_flags(tmp_path):
     """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
     MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and

@@ -466,14 +466,20 @@ def _names_in_comment(line: str, delim: str | None, width: int) -> list[str] | N
 
 
 def _rate_in_comment(line: str) -> float | None:
-    """A sample rate stated in a comment line ('// Sample rate: 50.0Hz', '# fs = 100')."""
-    m = re.fullmatch(r"([A-Za-z _]+?)\s*[:=]\s*([0-9.]+)\s*(hz)?", _comment_text(line), re.I)
+    """A sample rate stated in a comment line ('// Sample rate: 50.0Hz', '# fs = 100'), alone
+    or as one of its settings ('# Config: data_rate = 2000.0 Hz, filter = 488 Hz': PicoQuake)."""
+    text = _comment_text(line)
+    m = re.fullmatch(r"([A-Za-z _]+?)\s*[:=]\s*([0-9.]+)\s*(hz)?", text, re.I)
     if m and m.group(1).strip().lower() in _RATE_KEYS:
-        try:
-            return float(m.group(2))
-        except ValueError:
-            return None
-    return None
+        value = m.group(2)
+    else:
+        keys = "|".join(k.replace(" ", "[ _]") for k in _RATE_KEYS_NAMED)
+        m = re.search(rf"(?<![a-z])(?:{keys})\s*[:=]\s*([0-9.]+)\s*hz\b", text, re.I)
+        value = m.group(1) if m else None
+    try:
+        return None if value is None else float(value)
+    except ValueError:
+        return None
 
 
 def _start_and_rate_rows(rows: list[list[str]], num, value) -> tuple[float, float] | None:
@@ -935,6 +941,8 @@ def _header_cells(line: str, delim: str | None) -> list[str]:
 
 
 _RATE_KEYS = ("fs", "sample rate", "sample_rate", "samplerate", "rate", "hz", "frequency")
+# the names a comment line may give a rate among other settings, with the unit Hz after it
+_RATE_KEYS_NAMED = ("sample rate", "sampling rate", "samplerate", "data rate", "odr", "fs")
 
 
 def _is_mat(raw: bytes, path: Path) -> bool:
