@@ -689,7 +689,17 @@ def _unscaled(res, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _turning(g: np.ndarray) -> np.ndarray:
     """The readings of the turns, less the median reading: the samples more than 5 noise
-    levels from the median (a pose log is mostly at rest)."""
+    levels from the median (a pose log is mostly at rest). Rows where an axis reads its
+    log-wide extreme 3 or more times are left out: a clipped reading says nothing of the axis
+    turned about (a PicoQuake log starts with 32 rows of -250 deg/s on every axis, which read
+    as 'turns about one axis only')."""
+    clipped = np.zeros(len(g), bool)
+    for col in g.T:
+        for ext in (col.max(), col.min()):
+            hit = col == ext
+            if hit.sum() >= 3:
+                clipped |= hit
+    g = g[~clipped]
     dev = g - np.median(g, axis=0)
     size = np.linalg.norm(dev, axis=1)
     return dev[size > 5.0 * 1.4826 * np.median(size) + 1e-300]
