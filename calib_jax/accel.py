@@ -74,6 +74,10 @@ _UNIT_ALIASES = {
 # magnitude, exceeds this: 1 % of g is the accuracy paper 1 claims for the whole calibration.
 POOR_STDERR = 1e-2
 POOR_CONDITION = 1e8
+RESIDUAL_OVER_FLOOR = 10.0
+"""A fit whose interval-mean residual exceeds this many noise floors gets a warning: on real
+logs the fit leaves 0.3-3 floors (imu_tk's Xsens 3.1, CK-Explorer 2.0 and 2.2, a wrist log 1.0,
+a hand-held MPU-6050 0.3); a magnetometer's tumble fitted as an accelerometer left 14."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -531,6 +535,13 @@ def calibrate_accel(
     offset, scale = _nominal(x_static, units, g)
     before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
     after, floor = interval_errors(params, g, x, report)
+    if after > RESIDUAL_OVER_FLOOR * floor > 0:
+        warn.append(
+            f"the fit leaves {after / floor:.0f}x the noise floor (RMS of (|a| - g)/g {after:.3g} "
+            f"against {floor:.3g}): the model does not describe these poses. Check that the "
+            "columns are the accelerometer's and that each pose was held still, or find the "
+            "effect the model lacks (calib-jax diagnose)"
+        )
     cal = AccelCalibration(
         params=params,
         stderr=stderr,

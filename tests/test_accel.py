@@ -76,6 +76,27 @@ def test_static_detection_finds_every_pose():
     assert "48 static intervals" in rep.summary(100.0)
 
 
+def test_a_residual_far_above_the_noise_floor_is_a_warning():
+    """A magnetometer tumble fitted as an accelerometer (Razor AHRS, GPL-3) left 14x the noise
+    floor with status poorly_determined and no word. Here the poses of a simulated log, half
+    of them at 1.03 times the magnitude (no ellipsoid holds both halves): the warning names the
+    ratio; the clean log, at about 1 floor, has none."""
+    p = random_params(3)
+    log = simulate_accel(p, samples_per_pose=300, transition_samples=20, noise=2e-3, rng=3)
+    beta = p[6:]
+    raw = log.raw.copy()
+    half = len(raw) // 2
+    raw[half:] = beta + 1.03 * (raw[half:] - beta)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cj.FitStatusWarning)
+        bad = cj.calibrate_accel(raw, sample_rate=100.0)
+    said = [w for w in bad.warnings if w.startswith("the fit leaves")]
+    assert said and f"{bad.rms_after / bad.noise_floor:.0f}x the noise floor" in said[0]
+    clean = cj.calibrate_accel(log.raw, sample_rate=100.0)
+    assert clean.rms_after < 3 * clean.noise_floor
+    assert not any(w.startswith("the fit leaves") for w in clean.warnings)
+
+
 def test_means_and_samples_both_available(tol):
     log = sim(2)
     a = cj.calibrate_accel(log.raw, use="means", **DET)
