@@ -1243,14 +1243,22 @@ def calibrate_gyro(
         fit_a = _test_asymmetry(current, w, scale, solver, res)
         effects["scale_asymmetry"] = fit_a["effect"] | {"rms_without_deg": rms(after)}
         effects["scale_asymmetry"]["rms_with_deg"] = rms(fit_a["miss"])
-        verdict = "found" if fit_a["effect"]["accepted"] else "tested and not found"
+        F, p = fit_a["effect"]["F"], fit_a["effect"]["p"]
+        testable = bool(np.isfinite(F))
+        verdict = (
+            "found"
+            if fit_a["effect"]["accepted"]
+            else "tested and not found"
+            if testable
+            else "not testable (too few motions left for its F test)"
+        )
         notes.append(
             f"scale asymmetry {verdict}: s = "
             + ", ".join(f"{v:+.2g}" for v in fit_a["effect"]["coefficients"])
             + " +- "
             + ", ".join(f"{v:.2g}" for v in fit_a["effect"]["stderr"])
-            + f" (F = {fit_a['effect']['F']:.3g}, p = {fit_a['effect']['p']:.2g}); miss "
-            f"{rms(after):.3g} -> {rms(fit_a['miss']):.3g} deg"
+            + (f" (F = {F:.3g}, p = {p:.2g})" if testable else "")
+            + f"; miss {rms(after):.3g} -> {rms(fit_a['miss']):.3g} deg"
         )
         if fit_a["effect"]["accepted"]:
             C, cov, stderr, res, after = fit_a["fit"]
