@@ -14,6 +14,11 @@ Supported:
   ``t`` and those, 6 ``ax ay az gx gy gz`` (``ax ay az mx my mz`` with ``sensor="mag"``), 7 ``t``
   and those, 9 ``ax ay az gx gy gz mx my mz`` and 10 ``t`` and those; any other width is an error
   that asks for the mapping.
+* Vendor layouts read without flags: Empatica E4 (a start-time row and a rate row before the
+  samples), a rate in a comment line alone or among settings (``# Config: data_rate = 2000.0
+  Hz``), ISO dates and times in a column (read as Unix seconds), a header naming a last field
+  only some rows have (Mind Monitor's ``Elements``), a header of ``X,Y,Z`` alone (the caller's
+  ``sensor``, as for a headerless file). Each adds a note.
 * UTF-8 (with or without a byte-order mark), UTF-16/32 with a byte-order mark, Latin-1; gzip,
   bzip2 or xz compression (found by the file's first bytes, not its name); decimal commas
   (``1,234;0,998``) when the separator is not a comma. Each of these adds a note.
