@@ -424,17 +424,23 @@ def _time_steps(t, sample_rate, n: int, notes: list[str]) -> tuple[np.ndarray, f
     return np.full(n, 1.0 / sample_rate), float(sample_rate)
 
 
-def _saturated(g: np.ndarray, bias: np.ndarray, noise: np.ndarray) -> np.ndarray:
-    """(N, 3) True where an axis sits at its log-wide extreme, far from rest, in 3 or more
-    samples: the reading clipped at the gyro's range."""
-    bad = np.zeros(g.shape, bool)
+def _at_extreme(g: np.ndarray) -> np.ndarray:
+    """(N, 3) True where an axis reads its log-wide maximum or minimum, for an extreme read in
+    3 or more samples: a clipped reading (or, near rest, a quantised one)."""
+    out = np.zeros(g.shape, bool)
     for ax in range(3):
         col = g[:, ax]
         for ext in (col.max(), col.min()):
             hit = col == ext
-            if hit.sum() >= 3 and abs(ext - bias[ax]) > 50 * max(noise[ax], 1e-12):
-                bad[:, ax] |= hit
-    return bad
+            if hit.sum() >= 3:
+                out[:, ax] |= hit
+    return out
+
+
+def _saturated(g: np.ndarray, bias: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """(N, 3) True where an axis sits at its log-wide extreme, far from rest, in 3 or more
+    samples: the reading clipped at the gyro's range."""
+    return _at_extreme(g) & (np.abs(g - bias) > 50 * np.maximum(noise, 1e-12))
 
 
 MAX_REST_TURN_DEG_S = 0.1
@@ -693,13 +699,7 @@ def _turning(g: np.ndarray) -> np.ndarray:
     log-wide extreme 3 or more times are left out: a clipped reading says nothing of the axis
     turned about (a PicoQuake log starts with 32 rows of -250 deg/s on every axis, which read
     as 'turns about one axis only')."""
-    clipped = np.zeros(len(g), bool)
-    for col in g.T:
-        for ext in (col.max(), col.min()):
-            hit = col == ext
-            if hit.sum() >= 3:
-                clipped |= hit
-    g = g[~clipped]
+    g = g[~_at_extreme(g).any(axis=1)]
     dev = g - np.median(g, axis=0)
     size = np.linalg.norm(dev, axis=1)
     return dev[size > 5.0 * 1.4826 * np.median(size) + 1e-300]
