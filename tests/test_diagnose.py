@@ -424,6 +424,7 @@ def test_a_base_fit_that_does_not_converge_gives_no_verdict(monkeypatch):
     assert "the base model's fit did not converge" in d.notes[0]
 
 
+@pytest.mark.filterwarnings("ignore::calib_jax.calibration.FitStatusWarning")  # the failed fit
 def test_a_magnetometer_fit_that_failed_says_why():
     """A phone's walk (Aymdi/DeadReckoning): 'not possible: the declared model's fit is
     failed (converged ...); record more orientations', though no model was declared and the
