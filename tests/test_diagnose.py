@@ -424,6 +424,18 @@ def test_a_base_fit_that_does_not_converge_gives_no_verdict(monkeypatch):
     assert "the base model's fit did not converge" in d.notes[0]
 
 
+def test_a_tumble_without_a_rest_takes_no_quiet_stretch_for_one():
+    """A tumble with no rest: the rest detector's threshold (6 noise levels) let slow
+    stretches of the turn through, and the longest became 'the longest rest' whose scatter
+    set the noise floor (a Razor AHRS tumble: floor 6.3 % above the fit's 5.6 % RMS). A rest
+    holds the field's direction; these turn by 20-140 deg, are left out with a note, and the
+    floor comes from first differences."""
+    s = simulate_mag_log(seed=1, rest=0)
+    d = diagnose_mag(s.raw, t=s.t, sample_rate=50.0, progress=False)
+    assert any("left out as rests: the field direction turns" in n for n in d.notes)
+    assert "no rest in the log: white floor from first differences, no Allan floor" in d.notes
+
+
 @pytest.mark.filterwarnings("ignore::calib_jax.calibration.FitStatusWarning")  # the failed fit
 def test_a_magnetometer_fit_that_failed_says_why():
     """A phone's walk (Aymdi/DeadReckoning): 'not possible: the declared model's fit is

@@ -1139,6 +1139,21 @@ def _run_base_only(obs: Observations) -> np.ndarray:
 # --------------------------------------------------------------------------- magnetometer
 
 
+REST_TURN_DEG = 5.0
+"""A magnetometer's rest turns its field direction by at most this between its first and last
+quarters (a still sensor: the noise of two averages, hundredths of a degree); a slow stretch of
+a tumble that the detector's threshold lets through turns by 20-140 deg."""
+
+
+def _turn_deg(y: np.ndarray) -> float:
+    """The angle between the mean directions of the first and last quarters of vectors y."""
+    q = max(len(y) // 4, 1)
+    u = y / np.linalg.norm(y, axis=1, keepdims=True)
+    a, b = np.nanmean(u[:q], axis=0), np.nanmean(u[-q:], axis=0)
+    cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
 def diagnose_mag(
     data,
     *,
@@ -1242,8 +1257,19 @@ def diagnose_mag(
     if temp is None:
         obs.notes.append("no temperature column: temperature effects not tested")
     rep = detect_rest(x, sample_rate=sample_rate, valid=ok)
-    if rep.intervals:
-        iv = max(rep.intervals, key=lambda v: v.n)
+    # a rest holds the field's direction: a quiet stretch of a slow tumble turns by tens of
+    # degrees (a Razor AHRS tumble gave its 'longest rest' a floor above the fit's RMS)
+    rests = [
+        v for v in rep.intervals if _turn_deg((x[v.start : v.stop] - c) @ W.T) <= REST_TURN_DEG
+    ]
+    if len(rests) < len(rep.intervals):
+        obs.notes.append(
+            f"{len(rep.intervals) - len(rests)} quiet stretch(es) left out as rests: the field "
+            f"direction turns by more than {REST_TURN_DEG:g} deg across them (a slow part of the "
+            "tumble)"
+        )
+    if rests:
+        iv = max(rests, key=lambda v: v.n)
         rest = nrm_all[iv.start : iv.stop]
         # per-sample scatter about a quadratic trend (slow effects are what the loop looks
         # for, not noise), and the Allan deviation at one sample (the observation length)
