@@ -48,7 +48,7 @@ from .models.gyro import (
 )
 from .padding import bucket
 from .runtime import disk_jit
-from .static import looks_like_pose_table
+from .static import looks_like_pose_table, quarter_turn
 
 UNIT_SCALES = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
 """rad/s per unit of the readings a gyroscope may log (counts have no nominal scale)."""
@@ -486,18 +486,10 @@ def _field_turn_deg_s(m: np.ndarray, sample_rate: float) -> float:
     directions of its first and last quarters over the time between their centres; 0 when
     too short, or when that angle is within 4 standard errors of the quarters' noise (a short
     rest's few samples cannot tell a slow turn from noise)."""
-    q = len(m) // 4
-    if q < 2:
-        return 0.0
-    u = m / np.linalg.norm(m, axis=1, keepdims=True)
-    a, b = u[:q], u[-q:]
-    ma, mb = np.nanmean(a, axis=0), np.nanmean(b, axis=0)
-    noise = np.sqrt((np.nansum(np.nanvar(a, axis=0)) + np.nansum(np.nanvar(b, axis=0))) / q)
-    cos = float(ma @ mb / (np.linalg.norm(ma) * np.linalg.norm(mb)))
-    angle = float(np.arccos(np.clip(cos, -1.0, 1.0)))
+    angle, noise = quarter_turn(m)
     if angle <= 4.0 * noise:
         return 0.0
-    return float(np.degrees(angle)) / ((len(m) - q) / sample_rate)
+    return float(np.degrees(angle)) / ((len(m) - len(m) // 4) / sample_rate)
 
 
 def _motion_windows(intervals: np.ndarray) -> list[tuple[int, int, int]]:

@@ -1162,6 +1162,22 @@ def _strided(x, valid, sample_rate, threshold, threshold_factor, min_duration, m
     )
 
 
+def quarter_turn(v: np.ndarray) -> tuple[float, float]:
+    """(angle, noise), radians: the angle between the mean directions of the first and last
+    quarters of vectors ``v`` (N, 3), and its standard error from the quarters' scatter; (0,
+    inf) with fewer than 8 vectors. Whether a rest held a field's direction (the gyro's rests,
+    diagnose's magnetometer floor)."""
+    q = len(v) // 4
+    if q < 2:
+        return 0.0, float("inf")
+    u = v / np.linalg.norm(v, axis=1, keepdims=True)
+    a, b = u[:q], u[-q:]
+    ma, mb = np.nanmean(a, axis=0), np.nanmean(b, axis=0)
+    noise = np.sqrt((np.nansum(np.nanvar(a, axis=0)) + np.nansum(np.nanvar(b, axis=0))) / q)
+    cos = float(ma @ mb / (np.linalg.norm(ma) * np.linalg.norm(mb)))
+    return float(np.arccos(np.clip(cos, -1.0, 1.0))), float(noise)
+
+
 def detect_rest(
     x: np.ndarray, *, sample_rate: float | None = None, valid: np.ndarray | None = None
 ) -> StaticReport:

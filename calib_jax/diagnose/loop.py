@@ -55,7 +55,7 @@ from ..models.layout import ALPHA_ENTRIES
 from ..observations import TooFewPoses, accel_observations, screen_samples
 from ..padding import pad_rows
 from ..progress import finish, progress_bar
-from ..static import detect_rest
+from ..static import detect_rest, quarter_turn
 from ..status import status_message
 from . import model as M
 from .floors import allan_deviation, difference_noise, white_floor
@@ -1145,15 +1145,6 @@ quarters (a still sensor: the noise of two averages, hundredths of a degree); a 
 a tumble that the detector's threshold lets through turns by 20-140 deg."""
 
 
-def _turn_deg(y: np.ndarray) -> float:
-    """The angle between the mean directions of the first and last quarters of vectors y."""
-    q = max(len(y) // 4, 1)
-    u = y / np.linalg.norm(y, axis=1, keepdims=True)
-    a, b = np.nanmean(u[:q], axis=0), np.nanmean(u[-q:], axis=0)
-    cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-
-
 def diagnose_mag(
     data,
     *,
@@ -1260,7 +1251,9 @@ def diagnose_mag(
     # a rest holds the field's direction: a quiet stretch of a slow tumble turns by tens of
     # degrees (a Razor AHRS tumble gave its 'longest rest' a floor above the fit's RMS)
     rests = [
-        v for v in rep.intervals if _turn_deg((x[v.start : v.stop] - c) @ W.T) <= REST_TURN_DEG
+        v
+        for v in rep.intervals
+        if np.degrees(quarter_turn((x[v.start : v.stop] - c) @ W.T)[0]) <= REST_TURN_DEG
     ]
     if len(rests) < len(rep.intervals):
         obs.notes.append(
