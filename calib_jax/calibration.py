@@ -95,15 +95,77 @@ class SensorCalibration(Record):
     date: str = field(default_factory=_utc_now)
     source: str | None = None
     format_version: int = FORMAT_VERSION
+    status: str
+    """"ok", "poorly_determined", "not_converged" or "failed" (calib_jax.status)."""
+    condition: float
+    """Of the fit's normal matrix; NaN where the fit did not measure it."""
+    solver: str
+    solver_status: int
+    solver_message: str
+    iterations: int
 
     @property
     def success(self) -> bool:
         return is_usable(self.status)
 
+    def _header(self) -> dict:
+        """The JSON keys that open every sensor record: its version, kind and whose it is."""
+        keys = ("format_version", "kind", "sensor_id", "date", "source")
+        return {k: getattr(self, k) for k in keys}
+
+    def _solver_dict(self) -> dict:
+        """The JSON keys of the fit's outcome, the same in every sensor record."""
+        keys = ("condition", "status", "solver", "solver_status", "solver_message", "iterations")
+        return {k: getattr(self, k) for k in keys}
+
+    def _findings(self) -> dict:
+        """The JSON keys that close every sensor record: what to act on and what was chosen."""
+        keys = ("poorly_determined", "warnings", "notes")
+        return {k: list(getattr(self, k)) for k in keys}
+
+    @classmethod
+    def _open(cls, d: object, source, legacy: bool = False) -> tuple[_Doc, dict]:
+        """Check a saved record's version and kind, and read the fields every sensor record
+        has (:meth:`_header`, :meth:`_solver_dict`, :meth:`_findings`): the reader for the
+        rest and those fields as keyword arguments."""
+        r = _Doc(d, source)
+        _check_version(r.d, r.where)
+        cls._check_kind(r.d, r.where, legacy=legacy)
+        shared = {
+            "sensor_id": r.text("sensor_id", optional=True),
+            "date": r.text("date"),
+            "source": r.text("source", optional=True),
+            "condition": r.num("condition", finite=False),
+            "status": r.text("status"),
+            "solver": r.text("solver"),
+            "solver_status": r.integer("solver_status"),
+            "solver_message": r.text("solver_message"),
+            "iterations": r.integer("iterations"),
+            **{k: r.strings(k) for k in ("poorly_determined", "warnings", "notes")},
+        }
+        return r, shared
+
     def __eq__(self, other) -> bool:
         return _fields_equal(self, other)
 
     __hash__ = None  # type: ignore[assignment]
+
+
+def pipeline_outcome(fit, solver: str, finite: bool) -> dict:
+    """The solver fields of a record made from a :mod:`calib_jax.pipeline` fit: its status
+    word from the solver's code (``finite``: the parameters are finite) and no condition
+    number (the pipeline does not measure it)."""
+    from .status import fit_status, status_message
+
+    code = int(fit.status)
+    return {
+        "condition": float("nan"),
+        "status": fit_status(code, finite),
+        "solver": solver,
+        "solver_status": code,
+        "solver_message": status_message(code),
+        "iterations": int(fit.iterations),
+    }
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,16 +183,10 @@ class AccelCalibration(SensorCalibration):
     stderr: np.ndarray
     covariance: np.ndarray
     correlation: np.ndarray
-    condition: float
-    status: str
     input_units: str
     output_units: str
     g: float
     """Reference magnitude, in output units."""
-    solver: str
-    solver_status: int
-    solver_message: str
-    iterations: int
     nfev: int
     use: str
     """'means' (interval means) or 'samples' (all static samples)."""
@@ -190,8 +246,6 @@ class AccelCalibration(SensorCalibration):
         (N, 3) readings it was fitted to, ``g`` the magnitude it was given and ``units`` its
         unit. The status is the solver's: a pipeline fit has no pose detection, coverage or
         plausibility checks (a note says so; give ``calibrate_accel`` the log for them)."""
-        from .status import fit_status, status_message
-
         p = np.asarray(fit.params.to_vector(), float)
         cov = np.asarray(fit.covariance, float)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -201,21 +255,15 @@ class AccelCalibration(SensorCalibration):
         a = apply_params(p, x)
         g = float(g)
         norm = np.linalg.norm(x, axis=1)
-        code = int(fit.status)
         return cls(
+            **pipeline_outcome(fit, "pipeline.fit_accel", bool(np.all(np.isfinite(p)))),
             params=p,
             stderr=se,
             covariance=cov,
             correlation=corr,
-            condition=float("nan"),
-            status=fit_status(code, bool(np.all(np.isfinite(p)))),
             input_units=units,
             output_units=units,
             g=g,
-            solver="pipeline.fit_accel",
-            solver_status=code,
-            solver_message=status_message(code),
-            iterations=int(fit.iterations),
             nfev=0,
             use="points",
             n_intervals=0,
@@ -297,24 +345,15 @@ class AccelCalibration(SensorCalibration):
     def to_dict(self) -> dict:
         p, s = self.params, self.stderr
         d = {
-            "format_version": self.format_version,
-            "kind": self.kind,
+            **self._header(),
             "model": self.model,
-            "sensor_id": self.sensor_id,
-            "date": self.date,
-            "source": self.source,
             "units": {"input": self.input_units, "output": self.output_units, "g": self.g},
             "params": split_params(p),
             "stderr": split_params(s),
             **linear_forms(forward=np.asarray(p)[ALPHA_INDEX], offset=self.bias),
             "covariance": self.covariance.tolist(),
             "correlation": self.correlation.tolist(),
-            "condition": self.condition,
-            "status": self.status,
-            "solver": self.solver,
-            "solver_status": self.solver_status,
-            "solver_message": self.solver_message,
-            "iterations": self.iterations,
+            **self._solver_dict(),
             "nfev": self.nfev,
             "use": self.use,
             "n_intervals": self.n_intervals,
@@ -322,9 +361,7 @@ class AccelCalibration(SensorCalibration):
             "rms_before": self.rms_before,
             "rms_after": self.rms_after,
             "noise_floor": self.noise_floor,
-            "poorly_determined": list(self.poorly_determined),
-            "warnings": list(self.warnings),
-            "notes": list(self.notes),
+            **self._findings(),
             "static_means": np.asarray(self.static_means).tolist(),
             "static_intervals": np.asarray(self.static_intervals, int).tolist(),
             "nominal": {
@@ -340,9 +377,7 @@ class AccelCalibration(SensorCalibration):
         """Rebuild from :meth:`to_dict`'s layout, validated: a ValueError names ``source``
         (the file), the key and what is wrong (missing, not a number, non-finite, a zero
         gain, a singular gain matrix, a non-positive g)."""
-        r = _Doc(d, source)
-        _check_version(r.d, r.where)
-        cls._check_kind(r.d, r.where)
+        r, shared = cls._open(d, source, legacy=True)
         if r.d.get("model") not in MODELS:
             raise ValueError(
                 f"{r.where}not an accelerometer calibration: model is {r.d.get('model')!r}"
@@ -365,19 +400,14 @@ class AccelCalibration(SensorCalibration):
                 f"(condition number {np.linalg.cond(alpha):.3g}); refit the calibration"
             )
         return cls(
+            **shared,
             params=params,
             stderr=vec("stderr", False),
             covariance=r.arr("covariance", (9, 9), finite=False),
             correlation=r.arr("correlation", (9, 9), finite=False),
-            condition=r.num("condition", finite=False),
-            status=r.text("status"),
             input_units=r.text("units.input"),
             output_units=r.text("units.output"),
             g=r.num("units.g", positive=True),
-            solver=r.text("solver"),
-            solver_status=r.integer("solver_status"),
-            solver_message=r.text("solver_message"),
-            iterations=r.integer("iterations"),
             nfev=r.integer("nfev"),
             use=r.text("use"),
             n_intervals=r.integer("n_intervals"),
@@ -385,16 +415,10 @@ class AccelCalibration(SensorCalibration):
             rms_before=r.num("rms_before", finite=False),
             rms_after=r.num("rms_after", finite=False),
             noise_floor=r.num("noise_floor", finite=False),
-            poorly_determined=r.strings("poorly_determined"),
-            warnings=r.strings("warnings"),
-            notes=r.strings("notes"),
             static_means=r.arr("static_means", (-1, 3), default=[], finite=False),
             static_intervals=r.arr("static_intervals", (-1, 2), default=[]).astype(int),
             nominal_offset=r.arr("nominal.offset", (3,), default=[0.0, 0.0, 0.0]),
             nominal_scale=r.num("nominal.scale", default=1.0, positive=True),
-            sensor_id=r.text("sensor_id", optional=True),
-            date=r.text("date"),
-            source=r.text("source", optional=True),
             model=r.d["model"],
         )
 
@@ -564,6 +588,16 @@ class _Doc:
             )
         return a
 
+    def invertible(self, key: str) -> np.ndarray:
+        """A finite 3 x 3 matrix that can be inverted (a correction or shape matrix)."""
+        m = self.arr(key, (3, 3))
+        if not np.linalg.cond(m) < 1e12:
+            raise ValueError(
+                f"{self.where}key {key!r} is a singular matrix (condition number "
+                f"{np.linalg.cond(m):.3g}): it would map every reading onto a plane; refit"
+            )
+        return m
+
 
 def _raw_vectors(raw, sensor: str) -> np.ndarray:
     """(3,) or (N, 3) float array from an array or a loaded log's ``sensor`` columns."""
@@ -686,7 +720,6 @@ class MagCalibration(SensorCalibration):
     """The field magnitude after calibration: ``field`` if given, else det(M)^(-1/6) in raw
     units (det W = 1)."""
     model: str
-    status: str
     rms_before_pct: float
     rms_after_pct: float
     semi_axes: np.ndarray
@@ -695,11 +728,6 @@ class MagCalibration(SensorCalibration):
     """R of paper 2 eq. 18: columns are the ellipsoid's axes in the sensor frame."""
     stderr_center: np.ndarray
     stderr_soft_iron: np.ndarray
-    condition: float
-    solver: str
-    solver_status: int
-    solver_message: str
-    iterations: int
     n_samples: int
     coverage: float
     """Fraction of 100 equal-area cells of the sphere of directions holding data."""
@@ -749,7 +777,6 @@ class MagCalibration(SensorCalibration):
         The status is the solver's: a pipeline fit has no coverage or plausibility checks (a
         note says so)."""
         from .sphere import sphere_coverage
-        from .status import fit_status, status_message
 
         c = np.asarray(fit.params.hard_iron, float)
         W = np.asarray(fit.params.soft_iron, float)
@@ -758,7 +785,6 @@ class MagCalibration(SensorCalibration):
         y = (x - c) @ W.T
         r_y = np.linalg.norm(y, axis=1)
         radius = float(field)
-        code = int(fit.status)
         ok = bool(np.all(np.isfinite(W)))
         axes, R = ellipsoid_axes(W.T @ W / radius**2)
         cover = sphere_coverage(y / r_y[:, None])[0] if ok else 0.0
@@ -766,22 +792,17 @@ class MagCalibration(SensorCalibration):
         nr = np.linalg.norm(x, axis=1)
         pct = lambda e: float(100 * np.sqrt(np.mean(e**2)))  # noqa: E731
         return cls(
+            **pipeline_outcome(fit, "pipeline.fit_mag", ok),
             center=c,
             soft_iron=W,
             radius=radius,
             model=model,
-            status=fit_status(code, ok),
             rms_before_pct=pct(r0 / r0.mean() - 1.0),
             rms_after_pct=pct(r_y / radius - 1.0),
             semi_axes=axes,
             dcm=R,
             stderr_center=se[:3],
             stderr_soft_iron=se[3:].reshape(3, 3),
-            condition=float("nan"),
-            solver="pipeline.fit_mag",
-            solver_status=code,
-            solver_message=status_message(code),
-            iterations=int(fit.iterations),
             n_samples=len(x),
             coverage=float(cover),
             rms_raw_pct=pct(nr / nr.mean() - 1.0),
@@ -843,20 +864,15 @@ class MagCalibration(SensorCalibration):
     def to_dict(self) -> dict:
         return _sanitize(
             {
-                "format_version": self.format_version,
-                "kind": self.kind,
+                **self._header(),
                 "sensor": self.sensor,
                 "model": self.model,
-                "sensor_id": self.sensor_id,
-                "date": self.date,
-                "source": self.source,
                 "units": self.units,
                 "field": self.field,
                 "center": np.asarray(self.center).tolist(),
                 "soft_iron": np.asarray(self.soft_iron).tolist(),
                 **linear_forms(correction=self.soft_iron, offset=self.center),
                 "radius": self.radius,
-                "status": self.status,
                 "rms_before_pct": self.rms_before_pct,
                 "rms_after_pct": self.rms_after_pct,
                 "rms_raw_pct": self.rms_raw_pct,
@@ -866,17 +882,11 @@ class MagCalibration(SensorCalibration):
                     "center": np.asarray(self.stderr_center).tolist(),
                     "soft_iron": np.asarray(self.stderr_soft_iron).tolist(),
                 },
-                "condition": self.condition,
-                "solver": self.solver,
-                "solver_status": self.solver_status,
-                "solver_message": self.solver_message,
-                "iterations": self.iterations,
+                **self._solver_dict(),
                 "n_samples": self.n_samples,
                 "coverage": self.coverage,
                 "model_selection": self.model_selection,
-                "poorly_determined": list(self.poorly_determined),
-                "warnings": list(self.warnings),
-                "notes": list(self.notes),
+                **self._findings(),
             }
         )
 
@@ -884,29 +894,22 @@ class MagCalibration(SensorCalibration):
     def from_dict(cls, d: object, source: str | Path | None = None) -> MagCalibration:
         """Rebuild from :meth:`to_dict`'s layout, validated as :meth:`AccelCalibration.from_dict`
         (centre and W finite, W invertible, radius and field positive)."""
-        r = _Doc(d, source)
-        _check_version(r.d, r.where)
-        cls._check_kind(r.d, r.where, legacy=False)
+        r, shared = cls._open(d, source)
         if r.d.get("model") not in MAG_MODELS:
             raise ValueError(
                 f"{r.where}not an ellipsoid calibration: model is {r.d.get('model')!r}, not one "
                 f"of {MAG_MODELS}"
             )
-        W = r.arr("soft_iron", (3, 3))
-        if not np.linalg.cond(W) < 1e12:
-            raise ValueError(
-                f"{r.where}key 'soft_iron' is a singular matrix (condition number "
-                f"{np.linalg.cond(W):.3g}): it would map every reading onto a plane; refit"
-            )
+        W = r.invertible("soft_iron")
         ms = r.get("model_selection", {})
         if not isinstance(ms, dict):
             raise ValueError(f"{r.where}key 'model_selection' must be an object, got {ms!r}")
         return cls(
+            **shared,
             center=r.arr("center", (3,)),
             soft_iron=W,
             radius=r.num("radius", positive=True),
             model=r.d["model"],
-            status=r.text("status"),
             rms_before_pct=r.num("rms_before_pct", finite=False),
             rms_after_pct=r.num("rms_after_pct", finite=False),
             rms_raw_pct=r.num("rms_raw_pct", finite=False, default="nan"),
@@ -914,23 +917,12 @@ class MagCalibration(SensorCalibration):
             dcm=r.arr("dcm", (3, 3), finite=False),
             stderr_center=r.arr("stderr.center", (3,), finite=False),
             stderr_soft_iron=r.arr("stderr.soft_iron", (3, 3), finite=False),
-            condition=r.num("condition", finite=False),
-            solver=r.text("solver"),
-            solver_status=r.integer("solver_status"),
-            solver_message=r.text("solver_message"),
-            iterations=r.integer("iterations"),
             n_samples=r.integer("n_samples"),
             coverage=r.num("coverage", finite=False),
             field=None if r.get("field", None) is None else r.num("field", positive=True),
             units=r.text("units", optional=True),
             sensor=r.text("sensor", optional=True) or "mag",
             model_selection=_unsanitize(ms),
-            poorly_determined=r.strings("poorly_determined"),
-            warnings=r.strings("warnings"),
-            notes=r.strings("notes"),
-            sensor_id=r.text("sensor_id", optional=True),
-            date=r.text("date"),
-            source=r.text("source", optional=True),
         )
 
 

@@ -30,8 +30,6 @@ import numpy as np
 from .calibration import (
     AccelCalibration,
     SensorCalibration,
-    _check_version,
-    _Doc,
     _raw_vectors,
     _sanitize,
     _unsanitize,
@@ -84,13 +82,7 @@ class GyroCalibration(SensorCalibration):
     stderr_bias: np.ndarray
     covariance: np.ndarray
     """Of C's entries row by row (9 x 9)."""
-    condition: float
-    status: str
     input_units: str
-    solver: str
-    solver_status: int
-    solver_message: str
-    iterations: int
     nfev: int
     n_poses: int
     n_motions: int
@@ -229,11 +221,7 @@ class GyroCalibration(SensorCalibration):
         T, K = self.imu_tk()
         return _sanitize(
             {
-                "format_version": self.format_version,
-                "kind": self.kind,
-                "sensor_id": self.sensor_id,
-                "date": self.date,
-                "source": self.source,
+                **self._header(),
                 "units": {"input": self.input_units, "output": self.output_units},
                 **linear_forms(correction=self.matrix, offset=self.bias),
                 "imu_tk": {"misalignment": T.tolist(), "scale": np.diag(K).tolist()},
@@ -249,12 +237,7 @@ class GyroCalibration(SensorCalibration):
                     "offset": np.asarray(self.stderr_bias).tolist(),
                 },
                 "covariance": np.asarray(self.covariance).tolist(),
-                "condition": self.condition,
-                "status": self.status,
-                "solver": self.solver,
-                "solver_status": self.solver_status,
-                "solver_message": self.solver_message,
-                "iterations": self.iterations,
+                **self._solver_dict(),
                 "nfev": self.nfev,
                 "n_poses": self.n_poses,
                 "n_motions": self.n_motions,
@@ -272,38 +255,23 @@ class GyroCalibration(SensorCalibration):
                     "rest_s": self.allan_rest_s,
                     "units": "rad/s/sqrt(Hz), rad/s, s",
                 },
-                "poorly_determined": list(self.poorly_determined),
-                "warnings": list(self.warnings),
-                "notes": list(self.notes),
+                **self._findings(),
             }
         )
 
     @classmethod
     def from_dict(cls, d: object, source: str | Path | None = None) -> GyroCalibration:
         """Rebuild from :meth:`to_dict`'s layout; C must be finite and invertible."""
-        r = _Doc(d, source)
-        _check_version(r.d, r.where)
-        cls._check_kind(r.d, r.where, legacy=False)
-        C = r.arr("correction.matrix", (3, 3))
-        if not np.linalg.cond(C) < 1e12:
-            raise ValueError(
-                f"{r.where}key 'correction.matrix' is singular (condition number "
-                f"{np.linalg.cond(C):.3g}); refit the calibration"
-            )
+        r, shared = cls._open(d, source)
         return cls(
-            matrix=C,
+            **shared,
+            matrix=r.invertible("correction.matrix"),
             bias=r.arr("correction.offset", (3,)),
             stderr_matrix=r.arr("stderr.correction", (3, 3), finite=False),
             stderr_bias=r.arr("stderr.offset", (3,), finite=False),
             covariance=r.arr("covariance", (9, 9), finite=False),
-            condition=r.num("condition", finite=False),
-            status=r.text("status"),
             input_units=r.text("units.input"),
             output_units=r.text("units.output"),
-            solver=r.text("solver"),
-            solver_status=r.integer("solver_status"),
-            solver_message=r.text("solver_message"),
-            iterations=r.integer("iterations"),
             nfev=r.integer("nfev"),
             n_poses=r.integer("n_poses"),
             n_motions=r.integer("n_motions"),
@@ -322,12 +290,6 @@ class GyroCalibration(SensorCalibration):
             method=r.text("method"),
             scale_asymmetry=r.arr("scale_asymmetry", (3,), default=[0.0, 0.0, 0.0]),
             effects=_unsanitize(r.get("effects", {})),
-            poorly_determined=r.strings("poorly_determined"),
-            warnings=r.strings("warnings"),
-            notes=r.strings("notes"),
-            sensor_id=r.text("sensor_id", optional=True),
-            date=r.text("date"),
-            source=r.text("source", optional=True),
         )
 
 
