@@ -238,6 +238,7 @@ def test_clean_files_take_numpys_parser(tmp_path, monkeypatch):
     monkeypatch.setattr(F, "_parse_rows", refuse)
     rng = np.random.default_rng(0)
     x = rng.normal(size=(5000, 7))
+    x[:, 0] = np.arange(5000) / 100.0  # the time (a headerless file's first column must rise)
     for name, delim, head in [("a.csv", ",", "t,ax,ay,az,gx,gy,gz\n"), ("b.txt", " ", "")]:
         p = tmp_path / name
         np.savetxt(p, x, delimiter=delim, header=head.strip(), comments="")
@@ -816,6 +817,70 @@ def test_rows_in_brackets_say_what_was_found(tmp_path):
     rows = "".join(f"(({i}.5, -0.05, 10.5), (-38.7, -60.9, 0.9))\n" for i in range(30))
     with pytest.raises(ValueError, match=r"first line: '\(\(0\.5, -0\.05.*brackets"):
         load_log(_write(tmp_path, rows, "tuples.txt"))
+
+
+def test_json_list_lines_read_with_the_time_column_where_it_rises(tmp_path):
+    """micropython-fusion logs one JSON list per line, ``[[ax, ay, az], [gx, gy, gz], [mx, my,
+    mz], ticks_us]``, with a text marker between: refused before ('no row of 10 plain
+    numbers'), and with the brackets stripped the headerless ten columns were read time first,
+    accelerometer x taking the time's place. Now the lists are rows, the time is the column that
+    rises (here the last; the first is a sensor axis), and the marker is a skipped row."""
+    rows = [
+        f"[[{0.1 * np.sin(i):.4f}, 0.01, -0.98], [0.5, -0.2, 0.1], [12.0, -3.5, 40.2], "
+        f"{842_331_904 + 20_000 * i}]"
+        for i in range(40)
+    ]
+    rows.insert(20, "cal_end")
+    log = load_log(_write(tmp_path, "\n".join(rows) + "\n", "mpudata"))
+    assert log.acc.shape == (40, 3) and log.mag.shape == (40, 3)
+    np.testing.assert_allclose(log.acc[:, 2], -0.98)
+    np.testing.assert_allclose(log.mag[0], [12.0, -3.5, 40.2])
+    np.testing.assert_allclose(np.diff(log.t), 0.02)  # microseconds to seconds
+    assert any("JSON lists" in n for n in log.notes)
+    assert any("time last" in n for n in log.notes)
+    assert any("1 rows had the wrong number of fields" in n for n in log.notes)
+
+
+def test_a_headerless_time_layout_without_a_rising_column_is_refused(tmp_path):
+    """Ten headerless columns read as t then nine sensor columns; when neither the first
+    column nor the last rises, no clock is made from a sensor axis (it was: accelerometer x
+    as the time, and a 'sample rate' from its steps): the error says so and what to pass."""
+    rng = np.random.default_rng(0)
+    rows = "".join(",".join(f"{v:.4f}" for v in rng.normal(size=10)) + "\n" for _ in range(40))
+    with pytest.raises(ValueError, match="neither the first column nor the last rises"):
+        load_log(_write(tmp_path, rows, "nine_and_noise.csv"))
+
+
+def test_actigraph_epoch_counts_refused_by_name_and_its_raw_export_read(tmp_path):
+    """ActiLife's CSV opens with ten preamble lines, each one text cell padded with commas to
+    the data's nine fields (the lines below are GGIR's test file's, wadpac/GGIR, Apache-2.0;
+    the rows are made up). The first line was taken as a header and the error proposed
+    '--columns ax=------------ Data File Created By ...,ay=,az='. Counts per 5 s epoch are no
+    readings: the error now says what the file is and what to export; the raw export (epoch
+    00:00:00, 'Accelerometer X' columns) reads, its preamble left out with a note."""
+    pre = [
+        "------------ Data File Created By ActiGraph wGT3XBT ActiLife v6.13.3 Firmware v1.8.0 "
+        "date format M/d/yyyy Filter Normal Multiple Incline Limb: Waist -----------",
+        "Serial Number: MOS2D16160581",
+        "Start Time 21:35:00",
+        "Start Date 8/15/2016",
+        "Epoch Period (hh:mm:ss) 00:00:05",
+        "Download Time 18:59:15",
+        "Download Date 8/24/2016",
+        "Current Memory Address: 0",
+        "Current Battery Voltage: 4.03     Mode = 61",
+        "--------------------------------------------------",
+    ]
+    counts = "".join(f"{i % 300},{i % 7},{i % 11},2,0,0,5,0,0\n" for i in range(60))
+    text = "".join(line + ",,,,,,,,\n" for line in pre) + counts
+    with pytest.raises(ValueError, match=r"activity counts per 00:00:05 epoch.*raw"):
+        load_log(_write(tmp_path, text, "ActiGraph61.csv"))
+    raw = [line.replace("00:00:05", "00:00:00") + ",," for line in pre]
+    raw.append("Accelerometer X,Accelerometer Y,Accelerometer Z")
+    raw += [f"{0.01 * np.sin(i):.3f},-0.020,0.980" for i in range(60)]
+    log = load_log(_write(tmp_path, "\n".join(raw) + "\n", "raw.csv"))
+    np.testing.assert_allclose(log.acc[:, 2], 0.98)
+    assert any("10 line(s) before the data ignored" in n for n in log.notes)
 
 
 def test_ros_px4_and_phone_export_names_read_without_flags(tmp_path):

@@ -656,6 +656,30 @@ def iter_rows(path: str | Path, layout: dict, rows: int = 262_144):
             yield _parse_rows(body, *args, layout["text_cols"])
 
 
+def _refuse_epoch_counts(path, preamble: list[str]) -> None:
+    """ActiLife's export of activity counts (an 'Epoch Period' other than 00:00:00 in its
+    preamble): counts summed over each epoch, not readings, so no calibration can use them."""
+    for line in preamble:
+        m = re.search(r"Epoch Period \(hh:mm:ss\) (\d\d:\d\d:\d\d)", line)
+        if m and m.group(1) != "00:00:00":
+            raise ValueError(
+                f"{path} is an ActiGraph export of activity counts per {m.group(1)} epoch, not "
+                "accelerometer readings: a calibration needs the raw samples (in ActiLife, "
+                "export the .gt3x file's raw data to CSV: 'Accelerometer X, Y, Z' in g)"
+            )
+
+
+def _unbracket(text: str) -> str | None:
+    """Lines that are JSON lists of numbers (``[[ax, ay, az], [gx, gy, gz], t]``, as
+    micropython-fusion logs): the text without the brackets, so each line reads as a row of
+    its numbers; None when most lines are something else."""
+    lines = [s for ln in text[:_HEAD_CHARS].splitlines()[:60] if (s := ln.strip())][:50]
+    listed = sum(s.startswith("[") and s.endswith("]") for s in lines)
+    if len(lines) < 2 or listed < 0.8 * len(lines):
+        return None
+    return text.translate({ord("["): None, ord("]"): None})
+
+
 def _tail_codec(enc: str, head: bytes) -> str:
     if enc == "utf-8-sig":
         return "utf-8"
@@ -686,6 +710,12 @@ def _read_text(
     """
     big = tail_raw is not None
     text, enc = _decode(raw, path, notes, partial=big)
+    if (unbracketed := _unbracket(text)) is not None:
+        notes.append("lines of JSON lists ('[[ax, ay, az], ...]') read as rows of their numbers")
+        if big:  # read it all: the rows are parsed from this text, not from the file
+            unbracketed = _unbracket(_decode(_read_bytes(path), path, [])[0])
+            big, tail_raw = False, None
+        text, on_disk = unbracketed, False
     cache = {"text": None if big else text}
 
     def whole_text() -> str:
@@ -799,7 +829,8 @@ def _read_text(
             names = _header_cells(ln, delim)
             while len(names) > width and not names[-1]:
                 names.pop()
-            if len(names) == width:
+            if len(names) == width and (width < 2 or sum(bool(n.strip()) for n in names) >= 2):
+                # (one name padded with empty cells is a title, e.g. ActiLife's preamble lines)
                 header_rows.append((j, names))
                 j -= 1
                 continue  # a units line under the names: look one further up
@@ -866,6 +897,7 @@ def _read_text(
         else:
             ignored.append(ln.strip())
     if ignored:
+        _refuse_epoch_counts(path, ignored)
         notes.append(f"{len(ignored)} line(s) before the data ignored (first: {ignored[0][:60]!r})")
 
     # label columns: a word in every cell of the first and the last rows (an empty cell or one
@@ -1035,6 +1067,23 @@ def _read_mat(raw: bytes, path: Path, notes: list[str]) -> _Table:
     if m.shape[0] < m.shape[1]:
         m = m.T
     return _Table(None, m)
+
+
+def _time_last(cols: list[str], why: str, data: np.ndarray | None, path) -> tuple[list, str]:
+    """A headerless layout with time first (``cols[0] == 't'``) checked against the data: time
+    goes last when the last column rises and the first does not (micropython-fusion's
+    ``ax..mz, ticks``); neither rising is an error, not a clock made from a sensor axis."""
+    if data is None or cols[0] != "t" or len(data) < 2 or _rising(data[:, 0]):
+        return cols, why
+    if _rising(data[:, -1]):
+        return [*cols[1:], "t"], why + "; time last: the last column rises, the first does not"
+    width = len(cols)
+    raise ValueError(
+        f"{path} has no header and {width} columns, the layout of a time column and "
+        f"{width - 1} sensor columns, but neither the first column nor the last rises like a "
+        f"time ({_describe_columns(data)}); say what they are with --columns, e.g. --columns "
+        f"{','.join(cols[1:])},_ ('_' skips a column), and give --sample-rate"
+    )
 
 
 def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
@@ -1340,7 +1389,7 @@ def _assemble(
                 f"what they are with --columns, e.g. --columns {_example(width, data, sensor)} "
                 "('_' skips a column; t for a time column, else give --sample-rate)"
             )
-        cols, why = guess
+        cols, why = _time_last(*guess, data, path)
         source = {c: i for i, c in enumerate(cols)}
         notes.append(
             f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
@@ -1548,9 +1597,11 @@ def _time_in_seconds(t: np.ndarray) -> tuple[np.ndarray, str | None, float]:
 
 
 def _rising(col: np.ndarray) -> bool:
-    """A column that only goes up (a time or sample counter)."""
-    c = col[np.isfinite(col)]
-    return bool(c.size > 2 and np.all(np.diff(c) >= 0) and c[-1] > c[0])
+    """A column that goes up (a time or sample counter): its finite values rise at most steps
+    and fall at 1 % of them at most (a clock that wraps, as MicroPython's ticks_us does every
+    18 min, or a glitch; ties allowed, as a coarse clock has)."""
+    d = np.diff(col[np.isfinite(col)])
+    return bool(d.size > 1 and np.mean(d > 0) >= 0.5 and np.mean(d >= 0) >= 0.99)
 
 
 def _describe_columns(data: np.ndarray) -> str:
