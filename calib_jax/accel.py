@@ -78,6 +78,11 @@ RESIDUAL_OVER_FLOOR = 10.0
 """A fit whose interval-mean residual exceeds this many noise floors gets a warning: on real
 logs the fit leaves 0.3-3 floors (imu_tk's Xsens 3.1, CK-Explorer 2.0 and 2.2, a wrist log 1.0,
 a hand-held MPU-6050 0.3); a magnetometer's tumble fitted as an accelerometer left 14."""
+REST_RMS_LIMIT = 1e-2
+"""Poses held still leave less than this RMS of (|a| - g)/g after the fit (real multi-pose
+logs here: 1e-4 to 3e-3); more, and the quiet stretches the detector found are pauses in a
+hand-held motion, not rests (a micropython-fusion MPU-9150 log: 0.012). ``calib-jax marg``
+then fits the accelerometer's ellipsoid instead; the accelerometer and gyro fits warn."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -535,7 +540,13 @@ def calibrate_accel(
     offset, scale = _nominal(x_static, units, g)
     before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
     after, floor = interval_errors(params, g, x, report)
-    if after > RESIDUAL_OVER_FLOOR * floor > 0:
+    if after >= REST_RMS_LIMIT:
+        warn.append(
+            f"the {len(means)} poses leave {after:.2g} of g after the fit (held rests leave "
+            f"under {REST_RMS_LIMIT:g}): they look like pauses in a motion, not rests; hold "
+            "each pose still for a few seconds on a support"
+        )
+    elif after > RESIDUAL_OVER_FLOOR * floor > 0:
         warn.append(
             f"the fit leaves {after / floor:.0f}x the noise floor (RMS of (|a| - g)/g {after:.3g} "
             f"against {floor:.3g}): the model does not describe these poses. Check that the "

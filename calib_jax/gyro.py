@@ -866,7 +866,7 @@ class _PoseLog:
 def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _PoseLog:
     """Check the log, calibrate its accelerometer if not given, find the rests and the usable
     motions between them; a ValueError saying what to change where that fails."""
-    from .accel import calibrate_accel
+    from .accel import REST_RMS_LIMIT, calibrate_accel
 
     notes: list[str] = []
     source = None
@@ -927,6 +927,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         )
     dt, rate = _time_steps(t, sample_rate, len(g), notes)
     _check_turn_axes(g)
+    own_accel = accel is None
     if accel is None:
         # six-face logs: gravity's direction needs no cross terms
         accel = calibrate_accel(acc, sample_rate=rate, **{"model": "auto", **(accel_options or {})})
@@ -971,6 +972,13 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
 
     # motions between consecutive poses
     warn: list[str] = []
+    if own_accel and accel.rms_after >= REST_RMS_LIMIT:
+        warn.append(
+            f"the accelerometer's {accel.n_intervals} poses leave {accel.rms_after:.2g} of g "
+            f"after its fit (held rests leave under {REST_RMS_LIMIT:g}): they look like pauses "
+            "in a motion, not rests, and the gyro's bias and the gravity directions it turns "
+            "between come from them"
+        )
     windows = _motion_windows(iv)
     gap = max(GAP_S, GAP_STEPS / rate)
     longest_step = [dt[s : e - 1].max(initial=0.0) for _, s, e in windows]

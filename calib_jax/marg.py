@@ -399,10 +399,6 @@ class MARGRecord(Record):
         )
 
 
-STATIC_RMS_LIMIT = 1e-2
-"""accel="auto" uses paper 1's static fit only when it leaves less than this (relative to g)."""
-
-
 def calibrate_marg_log(
     log,
     *,
@@ -443,7 +439,7 @@ def calibrate_marg_log(
         The log lacks accelerometer or magnetometer columns, ``accel`` is unknown, or the data
         cannot give a calibration or a rotation (with what to change).
     """
-    from .accel import calibrate_accel
+    from .accel import REST_RMS_LIMIT, calibrate_accel
 
     if accel not in ACCEL_METHODS:
         raise ValueError(f"accel must be one of {ACCEL_METHODS}, got {accel!r}")
@@ -469,13 +465,11 @@ def calibrate_marg_log(
         try:
             acal = calibrate_accel(log, g=g, solver=solver, sensor_id=sensor_id, **static_options)
             method = "static"
-            if accel == "auto" and not acal.rms_after < STATIC_RMS_LIMIT:
-                # the detector finds short quiet moments in a tumble too; a static fit that
-                # leaves over 1 % of g was fitted to motion, not rests (real multi-pose logs
-                # here: 1e-4 to 3e-3)
+            if accel == "auto" and not acal.rms_after < REST_RMS_LIMIT:
+                # the detector finds short quiet moments in a tumble too
                 raise ValueError(
                     f"the {acal.n_intervals} quiet stretches it found leave {acal.rms_after:.2g} "
-                    f"of g after the fit (over {STATIC_RMS_LIMIT:g}): they are not rests"
+                    f"of g after the fit (over {REST_RMS_LIMIT:g}): they are not rests"
                 )
         except ValueError as exc:
             if accel == "static":

@@ -47,6 +47,7 @@ from typing import ClassVar
 import numpy as np
 from scipy import stats
 
+from ..accel import REST_RMS_LIMIT
 from ..align import block_jackknife_cov, time_blocks
 from ..calibration import Record
 from ..io.files import SensorLog, as_log
@@ -866,7 +867,14 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
             f"{rms_after / floor:.1f}x the floor with no driver it follows: excess scatter "
             "between observations (disturbed poses, or a floor that underestimates the noise)"
         )
-    if not unexplained and rms_after <= 1.5 * floor:
+    if obs.sensor == "accel" and rms_before >= REST_RMS_LIMIT:
+        notes.append(
+            f"the poses leave {rms_before:.2g} of g after the base fit (held rests leave under "
+            f"{REST_RMS_LIMIT:g}): they look like pauses in a motion, and the floor measured "
+            "in them holds that motion too, so being at or near it says little about the sensor; "
+            "record poses held still for a few seconds on a support"
+        )
+    elif not unexplained and rms_after <= 1.5 * floor:
         notes.append(
             f"at the noise floor: rms {rms_after * scale_to_output:.3g} {units} against a floor of "
             f"{floor * scale_to_output:.3g} {units}; nothing beyond noise"
