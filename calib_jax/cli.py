@@ -51,6 +51,29 @@ _pos_float = _number(float, 0.0, True, "a positive number")
 _nonneg_float = _number(float, 0.0, False, "a number >= 0")
 
 
+def _add_fit_options(
+    p: argparse.ArgumentParser,
+    columns: str,
+    json_what: str,
+    plot_what: str | None = None,
+    *,
+    detector: bool = True,
+    solvers: tuple[str, ...] | None = None,
+) -> None:
+    """The options every one-log fit shares: the solver, how to read the file (``columns`` an
+    example mapping), the static detector's, the sensor's id and where to write the result
+    (``json_what``) and its figure (``plot_what``, if it has one)."""
+    p.add_argument("--solver", default="lm1", choices=solvers or _SOLVERS)
+    p.add_argument("--columns", default=None, help=f"e.g. {columns}")
+    p.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
+    if detector:
+        _add_detector_options(p)
+    p.add_argument("--sensor-id", default=None)
+    p.add_argument("--json", default=None, help=f"write {json_what} here")
+    if plot_what is not None:
+        p.add_argument("--plot", default=None, help=f"write {plot_what} here")
+
+
 def _add_detector_options(p: argparse.ArgumentParser, *, block: bool = True) -> None:
     """The static detector's options, the same on every command; None means automatic."""
     g = p.add_argument_group(
@@ -629,7 +652,6 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--g", type=_pos_float, default=None, help="reference magnitude, output units")
     a.add_argument("--units", default="auto", help="input units: auto, counts, g, m/s^2")
     a.add_argument("--out-units", default=None, help="label of the calibrated output (with --g)")
-    a.add_argument("--solver", default="lm1", choices=_SOLVERS)
     a.add_argument(
         "--model",
         default="auto",
@@ -639,12 +661,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument("--use", default="means", choices=["means", "samples"])
     a.add_argument("--broyden", action="store_true", help="finite differences + Broyden (paper 1)")
-    a.add_argument("--columns", default=None, help="e.g. t,ax,ay,az or ax=AccX,ay=AccY,az=AccZ")
-    a.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
-    _add_detector_options(a)
-    a.add_argument("--sensor-id", default=None)
-    a.add_argument("--json", default=None, help="write the calibration JSON here")
-    a.add_argument("--plot", default=None, help="write a PNG figure here")
+    _add_fit_options(
+        a, "t,ax,ay,az or ax=AccX,ay=AccY,az=AccZ", "the calibration JSON", "a PNG figure"
+    )
     a.set_defaults(func=run_accel, output_files=_FILE_OUTPUTS)
 
     m = sub.add_parser(
@@ -668,12 +687,10 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["mag", "accel"],
         help="which columns to fit (a headerless 3-column file is read as this sensor)",
     )
-    m.add_argument("--solver", default="lm1", choices=_SOLVERS)
-    m.add_argument("--columns", default=None, help="e.g. mx,my,mz or mx=MagX,my=MagY,mz=MagZ")
-    m.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
-    m.add_argument("--sensor-id", default=None)
-    m.add_argument("--json", default=None, help="write the calibration JSON here")
-    m.add_argument("--plot", default=None, help="write a PNG figure here")
+    _add_fit_options(
+        m, "mx,my,mz or mx=MagX,my=MagY,mz=MagZ", "the calibration JSON", "a PNG figure",
+        detector=False,
+    )  # fmt: skip
     m.set_defaults(func=run_mag, output_files=_FILE_OUTPUTS)
 
     g = sub.add_parser(
@@ -715,13 +732,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--field", type=_pos_float, default=None, help="known field magnitude")
     g.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference (static)")
-    g.add_argument("--solver", default="lm1", choices=_SOLVERS)
-    g.add_argument("--columns", default=None, help="e.g. ax,ay,az,mx,my,mz or ax=AccX,...")
-    g.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
-    _add_detector_options(g)
-    g.add_argument("--sensor-id", default=None)
-    g.add_argument("--json", default=None, help="write the MARG record (kind 'marg') here")
-    g.add_argument("--plot", default=None, help="write the magnetometer figure (PNG) here")
+    _add_fit_options(
+        g, "ax,ay,az,mx,my,mz or ax=AccX,...", "the MARG record (kind 'marg')",
+        "the magnetometer figure (PNG)",
+    )  # fmt: skip
     g.set_defaults(func=run_marg, output_files=_FILE_OUTPUTS)
 
     gy = sub.add_parser(
@@ -751,12 +765,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     gy.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference")
     gy.add_argument("--units", default="auto", help="accelerometer units: auto, counts, g, m/s^2")
-    gy.add_argument("--solver", default="lm1", choices=["lm1", "lm2", "lm3"])
-    gy.add_argument("--columns", default=None, help="e.g. t,ax,ay,az,gx,gy,gz")
-    gy.add_argument("--sample-rate", type=_pos_float, default=None, help="Hz, if no time column")
-    _add_detector_options(gy)
-    gy.add_argument("--sensor-id", default=None)
-    gy.add_argument("--json", default=None, help="write the gyro calibration (kind 'gyro') here")
+    _add_fit_options(
+        gy, "t,ax,ay,az,gx,gy,gz", "the gyro calibration (kind 'gyro')",
+        solvers=("lm1", "lm2", "lm3"),
+    )  # fmt: skip
     gy.set_defaults(func=run_gyro, output_files=(("json", "--json"),))
 
     b = sub.add_parser(
