@@ -515,14 +515,14 @@ def calibrate_accel(
     k = r_s
     n = len(pts)
     opts = tuple(sorted((solver_options or {}).items()))
-    if jnp.zeros(()).dtype != jnp.float64:
+    if jax.dtypes.canonicalize_dtype(np.float64) != np.float64:  # (no eager program)
         _warnings.warn(
             "jax_enable_x64 is off: calibrating in float32 loses ~1e-7 relative accuracy; "
             "call jax.config.update('jax_enable_x64', True) first",
             stacklevel=2,
         )
     xpad, wpad = pad_rows((pts - c_s) / k)
-    res = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+    res = _compiled(solver, model, opts)(xpad, wpad)
     # back to raw units: gains and cross terms scale by k / g, biases by k and shift by c_s
     T = np.concatenate([np.full(6, k / g), np.full(3, k)])
     params = np.asarray(res.params, float) * T

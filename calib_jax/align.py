@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .lm import lm_solve, status_message
 from .padding import pad_rows
@@ -480,26 +481,26 @@ def align_mag_to_accel(
                 "the axes are kept as labelled; tumble through more orientations to decide"
             )
     theta0 = float(np.mean(np.arccos(np.clip(np.sum(a * (m @ P.T), axis=1), -1.0, 1.0))))
-    p0 = jnp.asarray(np.array([0.0, 0.0, 0.0, theta0]))
+    p0 = np.array([0.0, 0.0, 0.0, theta0])
     # pad to a power of two with zero weights: one compilation for logs of similar length
     n = len(a)
     a, w = pad_rows(a)
     m, _ = pad_rows(m)
     solve = _compiled_dip(max_iter)
-    args = (jnp.asarray(a), jnp.asarray(m), jnp.asarray(P))
-    res = solve(p0, *args, jnp.asarray(w))
+    args = (a, m, P)  # numpy: the compiled solve puts them on the device
+    res = solve(p0, *args, w)
     p = np.asarray(res.params)
     # honest errors: the same fit without each of the contiguous blocks (same shapes: no
     # new compilation), from the full fit's solution
     block = np.concatenate([time_blocks(n), np.full(len(w) - n, -1)])
     jack = np.stack(
         [
-            np.asarray(solve(res.params, *args, jnp.asarray(w * (block != b))).params)
+            np.asarray(solve(res.params, *args, w * (block != b)).params)
             for b in range(JACKKNIFE_BLOCKS)
         ]
     )
     se_honest = np.degrees(np.sqrt(np.diag(block_jackknife_cov(jack))))
-    R = np.asarray(rotvec_to_dcm(jnp.asarray(p[:3]))) @ P
+    R = Rotation.from_rotvec(np.array(p[:3])).as_matrix() @ P  # on the host: no eager jnp programs
     theta = np.degrees(p[3])
     se = np.asarray(res.stderr)
     dip_se = float(np.degrees(se[3]))

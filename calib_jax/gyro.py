@@ -476,7 +476,7 @@ def _pad_motions(windows, rates_of, dt, dirs) -> tuple[Motions, np.ndarray]:
         before[j], after[j] = dirs[i], dirs[i + 1]
     w = np.zeros(k)
     w[: len(windows)] = 1.0
-    return Motions(*(jnp.asarray(a) for a in (rates, steps, before, after))), w
+    return Motions(rates, steps, before, after), w  # numpy: the compiled fits take it over
 
 
 def _nested_f_test(rss0: float, rss1: float, extra: int, dof: int) -> tuple[float, float]:
@@ -632,7 +632,7 @@ def _fit_scaled(motions: Motions, w: np.ndarray, scale: float, solver: str):
     standard errors, the solver's result, per-motion miss in degrees)."""
     k = int(w.sum())
     motions = motions._replace(rates=motions.rates * scale)
-    res = _compiled("fit", int(solver[-1]))(jnp.eye(3).ravel(), motions, jnp.asarray(w))
+    res = _compiled("fit", int(solver[-1]))(np.eye(3).ravel(), motions, w)
     miss = np.degrees(np.asarray(_compiled("angles")(res.params, motions))[:k])
     return (*_unscaled(res, scale), res, miss)
 
@@ -758,11 +758,11 @@ def _test_asymmetry(motions: Motions, w: np.ndarray, scale: float, solver: str, 
     ``res``; an F test of the three on the LM chi2 (accepted at p < 1e-3)."""
     k = int(w.sum())
     scaled = motions._replace(rates=motions.rates * scale)
-    p0 = jnp.concatenate([res.params, jnp.zeros(3, res.params.dtype)])
-    r12 = _compiled("fit_asymmetric", int(solver[-1]))(p0, scaled, jnp.asarray(w))
+    p0 = np.concatenate([np.asarray(res.params), np.zeros(3)])
+    r12 = _compiled("fit_asymmetric", int(solver[-1]))(p0, scaled, w)
     F, p = _nested_f_test(float(res.chi2), float(r12.chi2), 3, 2 * k - 12)
     angles_of = _compiled("angles")
-    corrected = scaled._replace(rates=asymmetric(scaled.rates, r12.params[9:]))
+    corrected = scaled._replace(rates=asymmetric(scaled.rates, np.asarray(r12.params[9:]), np))
     miss = np.degrees(np.asarray(angles_of(r12.params[:9], corrected))[:k])
     return {
         "effect": {
@@ -1133,14 +1133,14 @@ def calibrate_gyro(
     pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
     motions, w = _pad_motions(windows, lambda s, e: g[s:e] - bias, dt, dirs)
     k = len(windows)
-    scale = float(_compiled("start")(motions, jnp.asarray(w)))
+    scale = float(_compiled("start")(motions, w))
     units, unit_notes = _resolve_units(units, abs(scale))
     notes += unit_notes
     C, cov, stderr, res, after = _fit_scaled(motions, w, scale, solver)
     angles = _compiled("angles")
     rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
     nominal = UNIT_SCALES.get(units, abs(scale)) * np.sign(scale)
-    before = np.degrees(np.asarray(angles(jnp.eye(3).ravel() * nominal, motions))[:k])
+    before = np.degrees(np.asarray(angles(np.eye(3).ravel() * nominal, motions))[:k])
     rms_raw = float("nan")
     if units in UNIT_SCALES:
         raw_motions, _ = _pad_motions(windows, lambda s, e: g[s:e], dt, dirs)

@@ -222,12 +222,12 @@ def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple):
     """(LMResult, centre, M, relative radial errors (N,), natural radius) of the normalised
     samples, centre and M as numpy. Above MOMENT_FORM_ABOVE samples, from their moments."""
     if len(xn) > MOMENT_FORM_ABOVE:
-        S = jnp.asarray(moments_of(xn))
+        S = moments_of(xn)
         res, c, M, radius = _compiled_moments(solver, model, opts)(S)
         c, M = np.asarray(c), np.asarray(M)
         return res, c, M, radial_error(c, M, xn, xp=np), float(radius)
     xpad, wpad = pad_rows(xn)
-    res, c, M, rel, radius = _compiled(solver, model, opts)(jnp.asarray(xpad), jnp.asarray(wpad))
+    res, c, M, rel, radius = _compiled(solver, model, opts)(xpad, wpad)
     return res, np.asarray(c), np.asarray(M), np.asarray(rel)[: len(xn)], float(radius)
 
 
@@ -285,7 +285,7 @@ def _check_options(model: str, solver: str, field: float | None) -> None:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     if field is not None and not (np.isfinite(field) and field > 0):
         raise ValueError(f"field must be a positive magnitude, got {field!r}")
-    if jnp.zeros(()).dtype != jnp.float64:
+    if jax.dtypes.canonicalize_dtype(np.float64) != np.float64:  # (no eager program)
         _warnings.warn(
             "jax_enable_x64 is off: fitting in float32 loses ~1e-7 relative accuracy; call "
             "jax.config.update('jax_enable_x64', True) first",
@@ -397,7 +397,7 @@ def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:
     usable = {
         m: f
         for m, f in fits.items()
-        if is_converged(int(f[0].status)) and natural_radius(jnp.asarray(f[2])) < RUNAWAY
+        if is_converged(int(f[0].status)) and natural_radius(f[2], np) < RUNAWAY
     }
     # prefer models whose parameters the data pin down: on partial coverage a full ellipsoid
     # can win the BIC by fitting directions it has not seen (BROAD trial 02, first half: full
@@ -488,7 +488,7 @@ def calibrate_mag(
         res.params, res.covariance, mean, s, np.nan if field is None else float(field)
     )
     centre, W = np.asarray(c), np.asarray(W)
-    radius = float(field) if field is not None else float(natural_radius(jnp.asarray(M)))
+    radius = float(field) if field is not None else float(natural_radius(M, np))
     semi_axes, R = ellipsoid_axes(M)  # NaN for a failed solve or a non-ellipsoid
 
     # standard errors of the returned centre (raw units) and W (output units per raw unit)
@@ -498,9 +498,9 @@ def calibrate_mag(
     se_n = np.asarray(res.stderr, float)
 
     solver_status = int(res.status)
-    runaway = not float(natural_radius(jnp.asarray(M_n))) < RUNAWAY
+    runaway = not float(natural_radius(M_n, np)) < RUNAWAY
     if runaway:
-        r_fit = float(natural_radius(jnp.asarray(M)))
+        r_fit = float(natural_radius(M, np))
         warn.append(
             f"the {chosen} ellipsoid ran away (mean radius {r_fit:.4g} against a data radius "
             f"of {s:.4g}): the data cover too little of the sphere for "

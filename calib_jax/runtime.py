@@ -103,7 +103,9 @@ class DiskJit:
             return self.jitted(*args)
         digest = None
         try:
-            leaves = [jax.numpy.asarray(x) for x in leaves]
+            # device_put, not jnp.asarray: that compiles an identity program per shape (six of
+            # them in a warm calib-jax marg, each a disk read)
+            leaves = [x if isinstance(x, jax.Array) else jax.device_put(x) for x in leaves]
             digest = self._digest(leaves, in_tree)
             if digest in self._refused:
                 return self.jitted(*args)

@@ -32,6 +32,7 @@ import warnings
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..align import (
     JACKKNIFE_BLOCKS,
@@ -348,7 +349,7 @@ def diagnose_marg(
         bar.set_postfix_str(f"{len(remaining)} candidates, {NULL_SIMS} null fits each")
         rows, idx = [], {}
         th = cur["theta"]
-        R_cur = np.asarray(rotvec_to_dcm(jnp.asarray(th[:3] * free[:3]))) @ P_cur
+        R_cur = Rotation.from_rotvec(np.array(th[:3] * free[:3])).as_matrix() @ P_cur
         nulls = [
             _null_series(Afn, Mf, tm, R_cur, th[4] * free[4], th[3], cur["e"], tob, rng, L)
             for _ in range(NULL_SIMS)
@@ -392,7 +393,7 @@ def diagnose_marg(
         steps[-1]["coefficients"] = _coefficients(c, cur, P_cur, best["stderr_honest"])
     finish(bar)
     # floors: the angle over the longest rest, with the final model's rotation
-    R_fin = np.asarray(rotvec_to_dcm(jnp.asarray(cur["theta"][:3] * free[:3]))) @ P_cur
+    R_fin = Rotation.from_rotvec(np.array(cur["theta"][:3] * free[:3])).as_matrix() @ P_cur
     Mn = Mn @ R_fin.T
     white, allan, note = _angle_floors(A, Afn, Mn, sample_rate, ok)
     notes.append(note)

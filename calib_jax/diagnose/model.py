@@ -164,8 +164,9 @@ def fit_each(compiled, *stacked, shared: tuple = ()) -> tuple[np.ndarray, ...]:
     this takes 3.3 s where the vmapped call took 11 s (warm, issue 17), and the one compilation
     serves any number of problems.
     """
-    arrays = [jnp.asarray(a) for a in stacked]
-    common = [jnp.asarray(a) for a in shared]
+    # numpy in, numpy slices: eager jnp conversions and indexing each compile a program
+    arrays = [np.asarray(a) for a in stacked]
+    common = [np.asarray(a) for a in shared]
     outs = [compiled(*(a[k] for a in arrays), *common) for k in range(arrays[0].shape[0])]
     return tuple(np.stack([np.asarray(o[i]) for o in outs]) for i in range(len(outs[0])))
 

@@ -86,11 +86,11 @@ ASYMMETRY_SOFTNESS = 1e-3
 """rad/s: the smooth sign tanh(w / this) of :func:`asymmetric` (differentiable at rest)."""
 
 
-def asymmetric(rates: ArrayLike, asym: ArrayLike) -> jax.Array:
+def asymmetric(rates: ArrayLike, asym: ArrayLike, xp=jnp) -> ArrayLike:
     """Rates read with a different scale one way than the other: w (1 + s sign(w)) per axis
-    (a smooth sign, so rest and the Jacobian stay well defined)."""
-    rates = jnp.asarray(rates)
-    return rates * (1.0 + asym * jnp.tanh(rates / ASYMMETRY_SOFTNESS))
+    (a smooth sign, so rest and the Jacobian stay well defined). ``xp``: np on the host."""
+    rates = xp.asarray(rates)
+    return rates * (1.0 + asym * xp.tanh(rates / ASYMMETRY_SOFTNESS))
 
 
 def gravity_residual_asymmetric(p12: ArrayLike, motions: Motions) -> jax.Array:

@@ -154,10 +154,10 @@ def soft_iron_matrix(M: Float[ArrayLike, "3 3"], radius: float | jax.Array) -> j
     return radius * sqrtm_spd(M)
 
 
-def natural_radius(M: Float[ArrayLike, "3 3"]) -> jax.Array:
+def natural_radius(M: Float[ArrayLike, "3 3"], xp=jnp) -> ArrayLike:
     """det(M)^(-1/6): the radius that keeps det W = 1 (MATLAB magcal's convention), i.e. the
-    geometric mean of the semi-axes, in raw units."""
-    return jnp.linalg.det(M) ** (-1.0 / 6.0)
+    geometric mean of the semi-axes, in raw units. ``xp``: np on the host (no eager program)."""
+    return xp.linalg.det(M) ** (-1.0 / 6.0)
 
 
 def raw_calibration(
