@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .calibration import AccelCalibration, FitStatusWarning, apply_params
+from .calibration import AccelCalibration, FitStatusWarning, accel_output_units, apply_params
 from .geometry import (
     ellipsoid_fit_moments,
     moments,
@@ -42,7 +42,7 @@ from .geometry import (
 )
 from .implicit import solve_implicit
 from .io.files import SensorLog, as_log
-from .lm import LMResult, fit_status, lm_solve, status_message
+from .lm import LMResult, checked_solver_options, fit_status, lm_solve, status_message
 from .models.accel import ALPHA_ENTRIES, PARAM_NAMES, normalized_sphere_residual
 from .observations import (
     AccelObservations,
@@ -506,7 +506,7 @@ def calibrate_accel(
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
     units = _resolve_units(units, report.n_intervals, static_norm, fit_norm)
     g = _reference_magnitude(g, units, static_norm, output_units)
-    out_units = output_units or ("g" if units == "counts" else units)
+    out_units = accel_output_units(units, output_units)
     warn += _coverage_warnings(
         pts, c_s, n_free, _nominal(pts, units, g)[0], pose_table=report.kind == "pose_table"
     )
@@ -514,7 +514,7 @@ def calibrate_accel(
     # normalise (centre and radius of the points' sphere) and fit
     k = r_s
     n = len(pts)
-    opts = tuple(sorted((solver_options or {}).items()))
+    opts = checked_solver_options(solver, solver_options)
     if jax.dtypes.canonicalize_dtype(np.float64) != np.float64:  # (no eager program)
         _warnings.warn(
             "jax_enable_x64 is off: calibrating in float32 loses ~1e-7 relative accuracy; "

@@ -46,7 +46,7 @@ from .accel import (
 from .calibration import BatchRecord
 from .geometry import moments, normalised_moments
 from .linalg import cholesky_small, eigh_small, inv3
-from .lm import lm_solve
+from .lm import checked_solver_options, lm_solve
 from .mag import ellipsoid_start_moments
 from .models.accel import alpha_matrix
 from .models.mag import (
@@ -523,7 +523,7 @@ def calibrate_accel_batch(
     n = np.shape(raw)[0]
     g = check_magnitude(g, "g", n)
     raw, valid, ref = _prepare(raw, mask, g, shard)
-    opts = tuple(sorted((solver_options or {}).items()))
+    opts = checked_solver_options(solver, solver_options)
     out = _compiled("accel", model, solver, opts, shard, int(min_points))(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)
 
@@ -552,6 +552,6 @@ def calibrate_mag_batch(
     n = np.shape(raw)[0]
     field = np.nan if field is None else check_magnitude(field, "field", n)
     raw, valid, ref = _prepare(raw, mask, field, shard)
-    opts = tuple(sorted((solver_options or {}).items()))
+    opts = checked_solver_options(solver, solver_options)
     out = _compiled("mag", model, solver, opts, shard)(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)

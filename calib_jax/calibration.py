@@ -151,6 +151,12 @@ class SensorCalibration(Record):
     __hash__ = None  # type: ignore[assignment]
 
 
+def accel_output_units(units: str, output_units: str | None = None) -> str:
+    """The calibrated accelerometer's unit: the one given, else g for counts (a unit sphere)
+    and the input unit otherwise."""
+    return output_units or ("g" if units == "counts" else units)
+
+
 def pipeline_outcome(fit, solver: str, finite: bool) -> dict:
     """The solver fields of a record made from a :mod:`calib_jax.pipeline` fit: its status
     word from the solver's code (``finite``: the parameters are finite) and no condition
@@ -238,14 +244,18 @@ class AccelCalibration(SensorCalibration):
         g: float,
         *,
         units: str = "g",
+        output_units: str | None = None,
         sensor_id: str | None = None,
         source: str | None = None,
     ) -> AccelCalibration:
         """The record of a :func:`calib_jax.pipeline.fit_accel` result (one sensor), to save,
         report or export like a :func:`calib_jax.calibrate_accel` result. ``points`` are the
-        (N, 3) readings it was fitted to, ``g`` the magnitude it was given and ``units`` its
-        unit. The status is the solver's: a pipeline fit has no pose detection, coverage or
-        plausibility checks (a note says so; give ``calibrate_accel`` the log for them)."""
+        (N, 3) readings it was fitted to, ``g`` the magnitude it was given, ``units`` the
+        readings' unit and ``output_units`` the calibrated one (by default as
+        :func:`calib_jax.calibrate_accel` has it: g for counts, else the input unit; the
+        exports scale by it). The status is the solver's: a pipeline fit has no pose
+        detection, coverage or plausibility checks (a note says so; give ``calibrate_accel``
+        the log for them)."""
         p = np.asarray(fit.params.to_vector(), float)
         cov = np.asarray(fit.covariance, float)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -262,7 +272,7 @@ class AccelCalibration(SensorCalibration):
             covariance=cov,
             correlation=corr,
             input_units=units,
-            output_units=units,
+            output_units=accel_output_units(units, output_units),
             g=g,
             nfev=0,
             use="points",

@@ -12,6 +12,7 @@ local one by default, or a scheduler address), each worker running the same chun
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -265,13 +266,36 @@ def calibrate_files(
     counting files and failures (:func:`calib_jax.progress.progress_bar`; None: on a
     terminal or in a notebook only).
     """
-    paths = [str(p) for p in paths]
+    paths = _checked_request(paths, sensor, options)
     results = (
         res
         for part in _chunks(paths, chunk)
         for res in _fit_chunk(part, sensor, columns, options, use, detector, sample_rate)
     )
-    yield from _counted(results, len(paths), progress, sensor)
+    return _counted(results, len(paths), progress, sensor)
+
+
+def _checked_request(paths, sensor: str, options: dict) -> list[str]:
+    """The paths as strings, with what every file shares checked once, when the call is made:
+    a model the batch cannot fit ('auto' is a single fit's choice) came back as each file's
+    'load_error' with a bare KeyError, and one path given as a string was read letter by
+    letter."""
+    if isinstance(paths, str | os.PathLike):
+        raise TypeError(
+            f"paths must be a list of log files, got one path {str(paths)!r}: pass "
+            f"[{str(paths)!r}], or sorted(Path(folder).glob('*.csv')) for a folder's logs"
+        )
+    from .batch import ACCEL_MODELS
+    from .models.mag import N_PARAMS
+
+    models = {"accel": tuple(ACCEL_MODELS), "mag": tuple(N_PARAMS)}.get(sensor)
+    model = options.get("model")
+    if models is not None and model is not None and model not in models:
+        raise ValueError(
+            f"model must be one of {models} for a batch of {sensor} logs (one model for every "
+            f"file; 'auto' chooses per log in calib_jax.calibrate_{sensor}), got {model!r}"
+        )
+    return [str(p) for p in paths]
 
 
 def _counted(results: Iterator[dict], total: int, progress, sensor: str) -> Iterator[dict]:
@@ -325,7 +349,7 @@ def calibrate_files_dask(
         raise ImportError(
             "calibrate_files_dask needs dask[distributed]: pip install 'calib_jax[dask]'"
         ) from exc
-    parts = list(_chunks([str(p) for p in paths], chunk))
+    parts = list(_chunks(_checked_request(paths, sensor, options), chunk))
     task = dict(sensor=sensor, columns=columns, options=options, use=use, detector=detector)
     task["sample_rate"] = sample_rate
     return _stream_from_dask(parts, task, scheduler, n_workers, progress)

@@ -47,7 +47,14 @@ from .geometry import (
 )
 from .implicit import solve_implicit
 from .io.files import SensorLog, as_log
-from .lm import LMResult, fit_status, is_converged, lm_solve, status_message
+from .lm import (
+    LMResult,
+    checked_solver_options,
+    fit_status,
+    is_converged,
+    lm_solve,
+    status_message,
+)
 from .models.mag import (
     MAG_MODELS,
     N_PARAMS,
@@ -479,7 +486,7 @@ def calibrate_mag(
     xv, mean, s, warn = _screened(x)
     xn = (xv - mean) / s
     _check_not_flat(xn, xv, mean, s, "gravity" if sensor == "accel" else "field")
-    opts = tuple(sorted((solver_options or {}).items()))
+    opts = checked_solver_options(solver, solver_options)
     fits, chosen, selection = _fit_candidates(xn, model, solver, opts, warn)
     res, c_n, M_n = fits[chosen][:3]
 

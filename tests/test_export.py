@@ -11,6 +11,7 @@ example session, and streamed output against the whole-file path.
 """
 
 import json
+import re
 import shutil
 import subprocess
 import tracemalloc
@@ -20,7 +21,7 @@ import pytest
 
 from calib_jax import export
 from calib_jax.apply import apply_calibration
-from calib_jax.cli import main
+from calib_jax.cli import demo_log_path, main
 from calib_jax.io import load_log
 
 from .conftest import shared_file
@@ -167,6 +168,27 @@ def test_ros_yaml_read_by_pyyaml_is_in_m_per_s2(tmp_path):
     SM, bias = np.reshape(d["SM"], (3, 3)), np.asarray(d["bias"])
     ros = RAW @ SM.T - bias
     assert _rel(ros, 9.80665 * cal.apply(RAW)) < 1e-14
+
+
+def test_a_pipeline_fit_of_counts_exports_as_calibrate_accel_does():
+    """A pipeline fit of raw counts made a record with output units 'counts' (from_fit used
+    the input unit for both), so its ROS export skipped the g -> m/s^2 factor: SM 9.80665x too
+    small beside calibrate_accel's record of the same poses (a new user's run). Now the output
+    unit follows calibrate_accel's rule (g for counts) and the two exports agree to the fits'
+    own agreement (the solvers stop at round-off: 1e-9 relative)."""
+    import jax.numpy as jnp
+
+    import calib_jax as cj
+    from calib_jax import pipeline as pl
+
+    cal = cj.calibrate_accel(demo_log_path())  # the shipped imu_tk Xsens log, in counts
+    assert (cal.input_units, cal.output_units) == ("counts", "g")
+    means = jnp.asarray(cal.static_means)
+    rec = cj.AccelCalibration.from_fit(pl.fit_accel(means, 1.0), means, 1.0, units="counts")
+    assert rec.output_units == "g"
+    ours, theirs = (export.write(c, "ros") for c in (rec, cal))
+    nums = [np.array(re.findall(r"-?\d+\.\d+(?:e[-+]?\d+)?", t), float) for t in (ours, theirs)]
+    np.testing.assert_allclose(nums[0], nums[1], rtol=1e-9)
 
 
 @pytest.mark.parametrize("fmt", ["imu_tk", "imucal", "ros"])

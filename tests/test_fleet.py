@@ -240,6 +240,22 @@ def test_batch_magnetometer_entries_get_the_single_fits_verdict(tmp_path):
     assert entries[1]["status"] != "failed" and entries[1]["warnings"]
 
 
+def test_a_request_no_file_can_meet_is_refused_when_made(fleet_dir):
+    """A new user's calls: model='auto' (a single fit's option) came back as every file's
+    'load_error' with a bare KeyError ('auto'), and one path given as a string was read letter
+    by letter (52 entries such as 'w does not exist'). Both are refused at the call, saying
+    what to pass, for the local and the Dask fleet alike; a good request still streams."""
+    paths = sorted(fleet_dir[1])  # the five simulated logs
+    for fleet in (calibrate_files, calibrate_files_dask):
+        with pytest.raises(ValueError, match=r"model must be one of \('accel9', 'accel6'\)"):
+            fleet(paths, model="auto")
+        with pytest.raises(TypeError, match=r"got one path .* pass \["):
+            fleet(paths[0])
+    with pytest.raises(ValueError, match="sphere"):
+        calibrate_files(paths, sensor="mag", model="ellipsoid")
+    assert next(iter(calibrate_files(paths[:1])))["status"] == "ok"
+
+
 def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nope")]) == 2
     assert "not a directory" in capsys.readouterr().err

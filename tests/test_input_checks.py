@@ -536,3 +536,22 @@ def test_an_accelerometer_without_gravity_is_named_so():
         cj.calibrate_accel(dead, sample_rate=100.0)
     with pytest.raises(ValueError, match="magnetometer reads exactly 0"):
         cj.calibrate_mag(dead)
+
+
+def test_solver_options_are_checked_against_the_solver():
+    """A new user's calls: solver_options a solver does not take were a TypeError from inside
+    the traced fit ('optx_solve() got an unexpected keyword argument ...', JAX's internal
+    frames removed). Now a ValueError naming the bad options and listing the solver's own, on
+    every path that takes solver_options (single fits and batches), before any fitting."""
+    from calib_jax.cli import demo_log_path
+
+    log = cj.load_log(demo_log_path())
+    with pytest.raises(ValueError, match=r"\['jacobian'\] are not options of solver 'optimistix'"):
+        calibrate_accel(log, solver="optimistix", solver_options={"jacobian": "broyden"})
+    with pytest.raises(ValueError, match=r"\['max_iters'\] .* it takes .*max_iter"):
+        calibrate_accel(log, solver_options={"max_iters": 2})
+    with pytest.raises(ValueError, match="chosen by the solver's name"):
+        cj.calibrate_mag(log.acc, solver="lm2", solver_options={"update_type": 3})
+    with pytest.raises(ValueError, match=r"\['max_iters'\]"):
+        cj.calibrate_accel_batch(log.acc[None], g=1.0, solver_options={"max_iters": 2})
+    assert calibrate_accel(log, solver_options={"max_iter": 50}).success  # a real one works

@@ -12,6 +12,33 @@ from ..status import (
 from .gavin import DEFAULTS, GAVIN_DEFAULTS, LMDefaults, finite_difference_jacobian, lm_solve
 from .result import LMHistory, LMResult, uncertainty, uncertainty_cholesky
 
+_SET_BY_CALLER = ("fun", "p0", "args", "weights", "update_type", "dof")
+"""lm_solve / optx_solve arguments each fit sets itself (update_type from lm1, lm2, lm3)."""
+
+
+def checked_solver_options(solver: str, options: dict | None) -> tuple:
+    """``solver_options`` as the sorted tuple the compiled fits are keyed by, each name
+    checked against the solver's own options (:func:`lm_solve` for lm1-lm3,
+    :func:`optx_solve` for optimistix): a wrong one was a TypeError from inside a traced
+    function; now a ValueError that lists what the solver takes."""
+    import inspect
+
+    if solver == "optimistix":
+        from .optx import optx_solve as fn
+    else:
+        fn = lm_solve
+    allowed = [k for k in inspect.signature(fn).parameters if k not in _SET_BY_CALLER]
+    bad = sorted(set(options or {}) - set(allowed))
+    if bad:
+        why = " (update_type is chosen by the solver's name: lm1, lm2, lm3)" * (
+            "update_type" in bad
+        )
+        raise ValueError(
+            f"solver_options {bad} are not options of solver {solver!r}{why}; it takes "
+            f"{', '.join(allowed)}"
+        )
+    return tuple(sorted((options or {}).items()))
+
 
 def __getattr__(name: str):
     # optx_solve on first use: optimistix takes 0.14 s to import, a tenth of a warm CLI call
@@ -30,6 +57,7 @@ __all__ = [
     "LMHistory",
     "LMResult",
     "Status",
+    "checked_solver_options",
     "finite_difference_jacobian",
     "fit_status",
     "FIT_STATUSES",
