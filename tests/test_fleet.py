@@ -256,6 +256,22 @@ def test_a_request_no_file_can_meet_is_refused_when_made(fleet_dir):
     assert next(iter(calibrate_files(paths[:1])))["status"] == "ok"
 
 
+def test_the_tables_rms_is_the_single_fits():
+    """The batch table's 'rms' was the moment form's RMS(1 - |a|^2/g^2) / 2 (0.0123685 on this
+    hand-held log) beside calibrate_accel's RMS(|a|/g - 1) of 0.0123146: now the same quantity,
+    equal to the fits' agreement (1e-9). The magnetometer's is the single fit's rms_after_pct
+    / 100 to 1e-3: its radius there is the ellipsoid's (det W = 1), here the mean calibrated
+    norm (tests/data/mpu9150_fusion: 3.0158 against 3.0148 %)."""
+    path = str(Path(__file__).parent / "data" / "mpu9150_fusion" / "mpudata")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cj.calibration.FitStatusWarning)
+        acc, mag = cj.calibrate_accel(path), cj.calibrate_mag(path)
+    [ea] = calibrate_files([path], progress=False)
+    [em] = calibrate_files([path], sensor="mag", progress=False)
+    assert ea["rms"] == pytest.approx(acc.rms_after, rel=1e-9)
+    assert 100 * em["rms"] == pytest.approx(mag.rms_after_pct, rel=1e-3)
+
+
 def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nope")]) == 2
     assert "not a directory" in capsys.readouterr().err
