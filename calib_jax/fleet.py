@@ -203,13 +203,17 @@ def _fit_chunk(
         return [_gyro_entry(p, columns, options, detector, sample_rate) for p in paths]
     prepared, out = [], []
     for p in paths:
+        log = None
         try:
             log = load_log(p, columns=columns, sensor=sensor, sample_rate=sample_rate)
             found = detector_keywords(sample_rate=log.sample_rate, **(detector or {}))
             pts, info = prepare_log(log, sensor, model=options.get("model"), use=use, **found)
             prepared.append((p, pts, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
-            out.append(_load_error(p, exc))
+            entry = _load_error(p, exc)
+            if log is not None:  # read, but no observations to fit: keep what the loader found
+                entry["notes"] = list(log.notes)
+            out.append(entry)
     out += fit_prepared(prepared, sensor, options)
     order = {str(p): k for k, p in enumerate(paths)}
     return sorted(out, key=lambda d: order[d["path"]])

@@ -272,6 +272,21 @@ def test_the_tables_rms_is_the_single_fits():
     assert 100 * em["rms"] == pytest.approx(mag.rms_after_pct, rel=1e-3)
 
 
+def test_a_log_read_but_with_too_few_poses_keeps_its_notes(tmp_path):
+    """A log that loads but holds too few poses is a load_error entry whose message says why
+    (the single fit's TooFewPoses); its notes, what the loader found, were dropped (a new
+    user's table showed NaN units and no notes for imucal's six-face session)."""
+    t = np.arange(3000) / 100.0
+    acc = np.tile([0.0, 0.0, 1.0], (3000, 1)) + 1e-3 * np.random.default_rng(0).normal(
+        size=(3000, 3)
+    )
+    path = tmp_path / "one_pose.csv"
+    np.savetxt(path, np.column_stack([t, acc]), delimiter=",")  # headerless: the loader notes
+    [e] = calibrate_files([path], progress=False)
+    assert e["status"] == "load_error" and "distinct poses" in e["message"]
+    assert any("headerless 4-column file read as t ax ay az" in n for n in e["notes"]), e
+
+
 def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nope")]) == 2
     assert "not a directory" in capsys.readouterr().err
