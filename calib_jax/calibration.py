@@ -157,6 +157,24 @@ def accel_output_units(units: str, output_units: str | None = None) -> str:
     return output_units or ("g" if units == "counts" else units)
 
 
+_FROM_PARAMS_NOTE = (
+    "from parameters (from_params): no fit behind this record, so no standard errors, errors or "
+    "checks of the data; status ok only means the parameters are finite and invertible"
+)
+
+
+def _from_params_outcome() -> dict:
+    """The solver fields of a record made from parameters, with no fit behind it."""
+    return {
+        "condition": float("nan"),
+        "status": "ok",
+        "solver": "params",
+        "solver_status": 0,
+        "solver_message": "no fit: the record was made from parameters",
+        "iterations": 0,
+    }
+
+
 def pipeline_outcome(fit, solver: str, finite: bool) -> dict:
     """The solver fields of a record made from a :mod:`calib_jax.pipeline` fit: its status
     word from the solver's code (``finite``: the parameters are finite) and no condition
@@ -235,6 +253,52 @@ class AccelCalibration(SensorCalibration):
         from .models.accel import AccelParams
 
         return AccelParams.from_vector(jnp.asarray(self.params))
+
+    @classmethod
+    def from_params(
+        cls,
+        params,
+        *,
+        g: float = 1.0,
+        units: str = "g",
+        output_units: str | None = None,
+        sensor_id: str | None = None,
+        source: str | None = None,
+    ) -> AccelCalibration:
+        """The record of parameters made or changed inside a JAX pipeline (an
+        :class:`calib_jax.models.accel.AccelParams`, e.g. after a gradient step, or paper 1's
+        9-vector), to save, report or export without a refit; :meth:`to_params` gives them
+        back. ``g``, ``units`` and ``output_units`` as in :meth:`from_fit`. No fit stands
+        behind it: standard errors, covariance and errors are NaN, the solver is 'params' and
+        the status 'ok' says only that the gains are finite and invertible (a note says so; a
+        ValueError otherwise, as on loading a file)."""
+        vec = params.to_vector() if hasattr(params, "to_vector") else params
+        p = np.array(vec, float).reshape(-1)
+        if p.shape != (9,) or not np.all(np.isfinite(p)):
+            raise ValueError(f"params must be 9 finite numbers (paper 1's order), got {p}")
+        if not np.linalg.cond(p[ALPHA_INDEX]) < 1e12:
+            raise ValueError("params give a singular gain matrix: no calibration inverts it")
+        nan9 = np.full(9, np.nan)
+        return cls(
+            **_from_params_outcome(),
+            params=p,
+            stderr=nan9,
+            covariance=np.full((9, 9), np.nan),
+            correlation=np.full((9, 9), np.nan),
+            input_units=units,
+            output_units=accel_output_units(units, output_units),
+            g=float(g),
+            nfev=0,
+            use="params",
+            n_intervals=0,
+            n_points=0,
+            rms_before=float("nan"),
+            rms_after=float("nan"),
+            noise_floor=float("nan"),
+            notes=[_FROM_PARAMS_NOTE],
+            sensor_id=sensor_id,
+            source=source,
+        )
 
     @classmethod
     def from_fit(
@@ -767,6 +831,54 @@ class MagCalibration(SensorCalibration):
         from .pipeline import MagParams
 
         return MagParams(hard_iron=jnp.asarray(self.center), soft_iron=jnp.asarray(self.soft_iron))
+
+    @classmethod
+    def from_params(
+        cls,
+        params,
+        *,
+        field: float = 1.0,
+        model: str = "full",
+        units: str | None = None,
+        sensor: str = "mag",
+        sensor_id: str | None = None,
+        source: str | None = None,
+    ) -> MagCalibration:
+        """The record of a :class:`calib_jax.pipeline.MagParams` (c, W) made or changed inside
+        a JAX pipeline, to save, report or export without a refit; :meth:`to_params` gives it
+        back. ``field``: the magnitude W maps onto (the pipeline's default 1; a
+        :func:`calibrate_mag` record's ``radius``). No fit stands behind it: standard errors
+        and errors are NaN, the solver 'params', the status 'ok' only says W is finite and
+        invertible (a note says so; a ValueError otherwise)."""
+        c = np.array(params.hard_iron, float).reshape(-1)
+        W = np.array(params.soft_iron, float)
+        if c.shape != (3,) or W.shape != (3, 3) or not np.all(np.isfinite(W)):
+            raise ValueError("params must hold a finite centre (3,) and soft iron W (3, 3)")
+        if not np.all(np.isfinite(c)) or not np.linalg.cond(W) < 1e12:
+            raise ValueError("params give a non-finite centre or a singular W: no calibration")
+        radius = float(field)
+        axes, R = ellipsoid_axes(W.T @ W / radius**2)
+        return cls(
+            **_from_params_outcome(),
+            center=c,
+            soft_iron=W,
+            radius=radius,
+            model=model,
+            rms_before_pct=float("nan"),
+            rms_after_pct=float("nan"),
+            semi_axes=axes,
+            dcm=R,
+            stderr_center=np.full(3, np.nan),
+            stderr_soft_iron=np.full((3, 3), np.nan),
+            n_samples=0,
+            coverage=float("nan"),
+            field=radius,
+            units=units,
+            sensor=sensor,
+            notes=[_FROM_PARAMS_NOTE],
+            sensor_id=sensor_id,
+            source=source,
+        )
 
     @classmethod
     def from_fit(

@@ -11,6 +11,7 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 import calib_jax as cj
+from calib_jax import export
 from calib_jax import pipeline as pl
 from calib_jax.attitude import reference_vectors
 from calib_jax.models.accel import distort
@@ -489,6 +490,34 @@ def test_pipeline_fits_become_records_that_round_trip(fits, tmp_path):
     np.testing.assert_allclose(mag.stderr_soft_iron, ref.stderr_soft_iron, rtol=1e-6)
     np.testing.assert_allclose(mag.stderr_center, ref.stderr_center, rtol=1e-6)
     np.testing.assert_allclose(mag.semi_axes, ref.semi_axes, rtol=1e-6)
+
+
+def test_parameters_changed_in_a_pipeline_become_records(fits, tmp_path):
+    """Issue 14's from_params: parameters made or changed inside JAX (here a gradient step
+    away from the fit) become a record without a refit (a new user found none: from_fit needs
+    a Fit). The record applies exactly as the pipeline does, exports, saves, loads equal, says
+    no fit stands behind it, and to_params gives the pytree back exactly; singular or
+    non-finite parameters are refused as on loading a file."""
+    fa, fm = fits
+    g = jax.grad(lambda p: jnp.sum(pl.apply(p, jnp.asarray(ACC))[:, 0]))(fa.params)
+    stepped = jax.tree.map(lambda p, d: p - 1e-4 * d, fa.params, g)
+    acc = cj.AccelCalibration.from_params(stepped, units="counts")
+    mag = cj.MagCalibration.from_params(fm.params, field=1.0)
+    np.testing.assert_allclose(acc.apply(ACC), pl.apply(stepped, jnp.asarray(ACC)), rtol=1e-12)
+    np.testing.assert_allclose(mag.apply(MAG), pl.apply(fm.params, jnp.asarray(MAG)), rtol=1e-12)
+    assert acc.output_units == "g" and "9.80665" in export.write(acc, "ros")
+    for rec, params in ((acc, stepped), (mag, fm.params)):
+        assert rec.status == "ok" and any("no fit behind this record" in n for n in rec.notes)
+        path = tmp_path / f"{type(rec).__name__}.json"
+        rec.save(path)
+        back = type(rec).load(path)
+        assert back == rec
+        for x, y in zip(jax.tree.leaves(back.to_params()), jax.tree.leaves(params), strict=True):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    with pytest.raises(ValueError, match="singular gain matrix"):
+        cj.AccelCalibration.from_params(np.zeros(9))
+    with pytest.raises(ValueError, match="singular W"):
+        cj.MagCalibration.from_params(pl.MagParams(jnp.zeros(3), jnp.zeros((3, 3))))
 
 
 def test_a_pipeline_batch_becomes_a_batch_record(tmp_path):
