@@ -849,6 +849,14 @@ def test_a_headerless_time_layout_without_a_rising_column_is_refused(tmp_path):
     rows = "".join(",".join(f"{v:.4f}" for v in rng.normal(size=10)) + "\n" for _ in range(40))
     with pytest.raises(ValueError, match="neither the first column nor the last rises"):
         load_log(_write(tmp_path, rows, "nine_and_noise.csv"))
+    # a clock of whole seconds at 50 Hz (98 % ties) still rises: time first, as before
+    coarse = "".join(
+        f"{i // 50}," + ",".join(f"{v:.4f}" for v in rng.normal(size=9)) + "\n" for i in range(200)
+    )
+    log = load_log(_write(tmp_path, coarse, "coarse_clock.csv"))
+    first = [float(v) for v in coarse.splitlines()[0].split(",")]
+    np.testing.assert_array_equal(log.acc[0], first[1:4])  # column 1 taken as the time
+    assert log.t is not None and np.all(np.diff(log.t) >= 0)
 
 
 def test_actigraph_epoch_counts_refused_by_name_and_its_raw_export_read(tmp_path):
