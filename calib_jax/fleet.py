@@ -143,9 +143,15 @@ def _norm_rms(entry: dict, pts: np.ndarray, info: dict, sensor: str, options: di
         return float(
             np.sqrt(np.mean((np.linalg.norm(apply_params(p, pts), axis=1) / info["g"] - 1) ** 2))
         )
-    r = np.linalg.norm((pts - p[:3]) @ p[3:].reshape(3, 3).T, axis=1)
-    radius = options.get("field") or float(np.mean(r))
+    r, radius = _mag_norms(p, pts, options)
     return float(np.sqrt(np.mean((r / radius - 1.0) ** 2)))
+
+
+def _mag_norms(p: np.ndarray, pts: np.ndarray, options: dict) -> tuple[np.ndarray, float]:
+    """A magnetometer entry's calibrated norms |W (x - c)| and the radius they are judged
+    against: the field if given, else their mean (one rule for the rms and the verdict)."""
+    r = np.linalg.norm((pts - p[:3]) @ p[3:].reshape(3, 3).T, axis=1)
+    return r, options.get("field") or float(np.mean(r))
 
 
 def _judge_mag(entry: dict, pts: np.ndarray, options: dict) -> dict:
@@ -159,7 +165,7 @@ def _judge_mag(entry: dict, pts: np.ndarray, options: dict) -> dict:
         return {}
     p = np.asarray(entry["params"], float)
     centre, W = p[:3], p[3:].reshape(3, 3)
-    radius = options.get("field") or float(np.mean(np.linalg.norm((pts - centre) @ W.T, axis=1)))
+    radius = _mag_norms(p, pts, options)[1]
     status, warn = judge_fit(
         pts, centre, W, entry["status"], options.get("model") or "full", radius
     )
