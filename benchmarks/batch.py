@@ -10,6 +10,11 @@ Times are medians of repeats (this machine is shared: medians and ratios, not si
 the peers run on at most --peer-max sensors and are reported per sensor. Writes
 benchmarks/results/batch.json, batch.md and batch.png.
 
+On a GPU the same command runs unchanged: the table names the device, results go to
+batch_gpu.* beside the CPU's, and each size's fit runs once under
+``jax.transfer_guard_device_to_host("disallow")`` (the batch must never copy back to the host
+before its result; the guard cannot see copies on the CPU, where it records "not checked").
+
 Peers:
 - SciPy: ``least_squares(method="lm")`` per sensor, the same normalised residual, the default
   finite-difference Jacobian (what a SciPy user writes), data normalised the same way.
@@ -32,8 +37,9 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _device import describe, label, suffix  # noqa: E402
 
-from calib_jax.batch import calibrate_accel_batch  # noqa: E402
+from calib_jax.batch import MOMENT_CHUNK, calibrate_accel_batch  # noqa: E402
 from calib_jax.models.accel import distort, normalized_sphere_residual  # noqa: E402
 from calib_jax.simulate import random_params  # noqa: E402
 
@@ -149,10 +155,21 @@ def main() -> None:
     ap.add_argument("--peer-max", type=int, default=100)
     ap.add_argument("--stream", type=int, default=0, help="sensors to stream in chunks")
     ap.add_argument("--chunk", type=int, default=1000)
+    ap.add_argument(
+        "--moment-chunk",
+        type=int,
+        default=None,
+        help="sensors per step of the moment pass on this platform (calib_jax.batch.MOMENT_CHUNK)",
+    )
     ap.add_argument("--shard", action="store_true", help="shard the batch over local devices")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args()
     devices = len(jax.devices())
+    info = describe()
+    if args.moment_chunk is not None:
+        MOMENT_CHUNK[info["platform"]] = args.moment_chunk
+    info["moment_chunk"] = MOMENT_CHUNK.get(info["platform"], MOMENT_CHUNK["gpu"])
+    print(label(info), f"moment pass: {info['moment_chunk']} sensors per step", flush=True)
     rows = []
     for n in args.sizes:
         raw, P = simulate(n)
@@ -162,6 +179,14 @@ def main() -> None:
             lambda rj=rj: calibrate_accel_batch(rj, shard=args.shard).params, repeats
         )
         r = calibrate_accel_batch(rj, shard=args.shard)
+        guard = "not checked (the guard sees no copies on the CPU)"
+        if info["platform"] != "cpu":
+            try:
+                with jax.transfer_guard_device_to_host("disallow"):
+                    jax.block_until_ready(calibrate_accel_batch(rj, shard=args.shard))
+                guard = "none (transfer guard)"
+            except Exception as e:  # a copy found: record it, keep the timings
+                guard = f"found: {str(e).splitlines()[0][:200]}"
         z = np.abs(np.asarray(r.params) - P) / np.asarray(r.stderr)
         row = {
             "sensors": n,
@@ -171,6 +196,9 @@ def main() -> None:
             "calib_jax_ms_per_sensor": 1e3 * warm / n,
             "calib_jax_converged": int(np.sum(r.success)),
             "max_abs_z_vs_truth": float(np.nanmax(z)),
+            "device_to_host_copies_in_fit": guard,
+            # the samples read once per fit (float64 x 3 and the bool mask), over the warm time
+            "input_gb_per_s": n * N_SAMPLES * (3 * 8 + 1) / warm / 1e9,
         }
         m = min(n, args.peer_max)
         t_sp, p_sp = scipy_loop(raw[:m])
@@ -198,7 +226,7 @@ def main() -> None:
             flush=True,
         )
         del raw, rj
-    result = {"rows": rows, "devices": devices, "shard": args.shard}
+    result = {"rows": rows, "devices": devices, "shard": args.shard, "machine": info}
     if args.stream and rows:
         print("note: peak RSS is per process; run --stream with --sizes (none) to measure it alone")
     if args.stream:
@@ -208,18 +236,19 @@ def main() -> None:
         f"Batch accelerometer fits, {N_SAMPLES} samples per sensor, "
         f"{'sharded over ' + str(devices) + ' devices' if args.shard else '1 device'} "
         "(medians; peers on at most "
-        f"{args.peer_max} sensors, per sensor):",
+        f"{args.peer_max} sensors, per sensor), {label(info)}:",
         "",
         "| sensors | calib_jax ms/sensor | first call s | SciPy lm ms/sensor | ratio | "
-        "optimistix vmap ms/sensor | ratio | max rel diff vs SciPy |",
-        "|---|---|---|---|---|---|---|---|",
+        "optimistix vmap ms/sensor | ratio | max rel diff vs SciPy | input GB/s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['sensors']} | {r['calib_jax_ms_per_sensor']:.3f} | "
             f"{r['calib_jax_first_s']:.1f} | {r['scipy_ms_per_sensor']:.2f} | "
             f"{r['speedup_vs_scipy']:.0f}x | {r['optimistix_ms_per_sensor']:.2f} | "
-            f"{r['speedup_vs_optimistix']:.0f}x | {r['scipy_max_rel_diff']:.1e} |"
+            f"{r['speedup_vs_optimistix']:.0f}x | {r['scipy_max_rel_diff']:.1e} | "
+            f"{r['input_gb_per_s']:.1f} |"
         )
     if args.stream:
         s = result["stream"]
@@ -233,7 +262,7 @@ def main() -> None:
     print(md)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    tag = ("_sharded" if args.shard else "") + ("" if rows else "_stream")
+    tag = ("_sharded" if args.shard else "") + ("" if rows else "_stream") + suffix(info)
     (out / f"batch{tag}.json").write_text(json.dumps(result, indent=2))
     (out / f"batch{tag}.md").write_text(md)
     if not rows:

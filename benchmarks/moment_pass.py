@@ -1,7 +1,10 @@
 """The batch's moment pass alone: today's (the mean, then the 35 power sums about it,
 calib_jax.batch._batch_moments) against the pass it replaced (mean, RMS distance, normalise,
 then the 6 x 10 monomial product; written out below as the reference), in one process,
-interleaved, medians. Writes benchmarks/results/moment_pass.json.
+interleaved, medians, with the device's memory ceiling measured in the same run (a jitted
+``raw + 1``: every byte read once and written once) and the fraction of it each pass reaches
+(the pass must read the samples and the mask once). Writes
+benchmarks/results/moment_pass.json (moment_pass_gpu.json on a GPU).
 
     .venv/bin/python benchmarks/moment_pass.py [--sensors 1000] [--repeats 15]
 """
@@ -9,6 +12,7 @@ interleaved, medians. Writes benchmarks/results/moment_pass.json.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import statistics
@@ -21,8 +25,9 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _device import describe, label, suffix  # noqa: E402
 
-from calib_jax.batch import _batch_moments  # noqa: E402
+from calib_jax.batch import MOMENT_CHUNK, _batch_moments  # noqa: E402
 from calib_jax.geometry import centre_and_scale  # noqa: E402
 
 
@@ -58,6 +63,13 @@ def main() -> None:
     ap.add_argument("--sensors", type=int, default=1000)
     ap.add_argument("--samples", type=int, default=4800)
     ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument(
+        "--chunks",
+        type=int,
+        nargs="*",
+        default=[],
+        help="also time the current pass at these sensors per step (0: one vmap over all)",
+    )
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args()
     rng = np.random.default_rng(0)
@@ -65,16 +77,27 @@ def main() -> None:
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     raw = jnp.asarray(d * 1.02 + 0.05 + 2e-3 * rng.normal(size=d.shape))
     valid = jnp.ones(raw.shape[:2], bool)
+    info = describe()
     old, new = jax.jit(previous_pass), jax.jit(_batch_moments)
+    copy = jax.jit(lambda x: x + 1.0)
+    jax.block_until_ready(copy(raw))
     s_old, s_new = old(raw, valid)[0], new(raw, valid)[0]
     diff = float(jnp.max(jnp.abs(s_old - s_new)) / jnp.max(jnp.abs(s_old)))
-    times = {"previous": [], "current": []}
+    passes = {"previous": old, "current": new, "copy": lambda r, v: copy(r)}
+    for c in args.chunks:
+        passes[f"chunk {c}"] = jax.jit(functools.partial(_batch_moments, chunk=c))
+        s_c = passes[f"chunk {c}"](raw, valid)[0]
+        assert float(jnp.max(jnp.abs(s_c - s_new))) <= 1e-12 * float(jnp.max(jnp.abs(s_new)))
+    times = {k: [] for k in passes}
     for _ in range(args.repeats):
-        for name, f in (("previous", old), ("current", new)):
+        for name, f in passes.items():
             t = time.perf_counter()
             jax.block_until_ready(f(raw, valid))
             times[name].append(time.perf_counter() - t)
     ms = {k: 1e3 * statistics.median(v) / args.sensors for k, v in times.items()}
+    copy_gbs = 2 * raw.nbytes / (ms["copy"] * args.sensors / 1e3) / 1e9
+    pass_bytes = raw.nbytes + valid.nbytes
+    gbs = {k: pass_bytes / (ms[k] * args.sensors / 1e3) / 1e9 for k in ms if k != "copy"}
     row = {
         "sensors": args.sensors,
         "samples": args.samples,
@@ -82,17 +105,33 @@ def main() -> None:
         "current_ms_per_sensor": ms["current"],
         "speedup": ms["previous"] / ms["current"],
         "max_abs_diff_over_max_S": diff,
+        "copy_ceiling_gb_per_s": copy_gbs,
+        "previous_gb_per_s": gbs["previous"],
+        "current_gb_per_s": gbs["current"],
+        "current_fraction_of_copy_ceiling": gbs["current"] / copy_gbs,
+        "default_chunk": MOMENT_CHUNK.get(jax.default_backend(), MOMENT_CHUNK["gpu"]),
+        "chunks_ms_per_sensor": {k[6:]: ms[k] for k in ms if k.startswith("chunk ")},
+        "best_chunk": min(args.chunks, key=lambda c: ms[f"chunk {c}"]) if args.chunks else None,
         "load": os.getloadavg()[0],
         "device": str(jax.devices()[0]),
+        "machine": info,
     }
-    print("| pass | ms per sensor |\n|---|---|")
-    print(f"| previous (normalise, 6 x 10 product) | {ms['previous']:.4f} |")
-    print(f"| current (mean, 35 power sums) | {ms['current']:.4f} |")
+    print(label(info))
+    print("| pass | ms per sensor | GB/s | fraction of the copy ceiling |\n|---|---|---|---|")
+    names = {
+        "previous": "previous (normalise, 6 x 10 product)",
+        "current": f"current (mean, 35 power sums), {row['default_chunk']} sensors per step",
+    }
+    names.update({f"chunk {c}": f"current, {c or 'all'} sensors per step" for c in args.chunks})
+    for k, name in names.items():
+        print(f"| {name} | {ms[k]:.5f} | {gbs[k]:.1f} | {gbs[k] / copy_gbs:.3f} |")
+    print(f"| copy ceiling (raw + 1, read and write) | {ms['copy']:.5f} | {copy_gbs:.1f} | 1 |")
     print(
         f"speed-up {row['speedup']:.2f}x; S agrees to {diff:.1e} of its largest entry; "
         f"load {row['load']:.2f}; {row['device']}"
     )
-    out = Path(args.out) / "moment_pass.json"
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    out = Path(args.out) / f"moment_pass{suffix(info)}.json"
     out.write_text(json.dumps(row, indent=2) + "\n")
     print(f"wrote {out}")
 

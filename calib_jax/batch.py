@@ -269,16 +269,26 @@ def _linear_forms(p: np.ndarray) -> dict:
     return linear_forms(offset=p[:3], correction=p[3:].reshape(3, 3))  # y = W (raw - c)
 
 
-def _batch_moments(raw, valid):
-    """(S, mean, k) per sensor: moments of the normalised samples, one sensor at a time.
+# Sensors per step of the moment pass, by JAX platform (0: all at once, one vmap).
+MOMENT_CHUNK = {"cpu": 8, "gpu": 4096}
 
-    lax.map in chunks of 8 sensors, not one vmap over all: a chunk's samples (0.9 MB for
+
+def _batch_moments(raw, valid, chunk: int | None = None):
+    """(S, mean, k) per sensor: moments of the normalised samples, ``chunk`` sensors at a time
+    (default by platform, :data:`MOMENT_CHUNK`).
+
+    CPU: lax.map in chunks of 8 sensors, not one vmap over all: a chunk's samples (0.9 MB for
     4,800 each) stay in cache for the mean and the power sums; a vmap over the whole batch
     materialises every sensor's monomials at once and ran 3-4x slower here (0.48 against 0.15
     ms per sensor, with the earlier 6 x 10 product), one sensor at a time about 10 % slower
     than chunks; chunks of 4, 16 and 32 measured 0.101, 0.117 and 0.123 ms against 0.105
-    for 8 (benchmarks/moment_pass.py times the pass).
+    for 8 (benchmarks/moment_pass.py times the pass). A GPU runs each step as a few kernel
+    launches, so it takes far larger chunks: on an H200 at 10,000 sensors, 8, 64, 512 and
+    4096 per step took 6.3, 0.86, 0.52 and 0.50 us per sensor
+    (benchmarks/results/moment_pass_gpu.json, ``moment_pass.py --chunks``).
     """
+    if chunk is None:
+        chunk = MOMENT_CHUNK.get(jax.default_backend(), MOMENT_CHUNK["gpu"])
 
     def one(args):
         r, v = args
@@ -287,7 +297,9 @@ def _batch_moments(raw, valid):
         v = v & jnp.all(jnp.isfinite(r), axis=-1)
         return normalised_moments(r, v.astype(r.dtype))
 
-    return jax.lax.map(one, (raw, valid), batch_size=8)
+    if chunk == 0 or chunk >= raw.shape[0]:
+        return jax.vmap(lambda r, v: one((r, v)))(raw, valid)
+    return jax.lax.map(one, (raw, valid), batch_size=chunk)
 
 
 def _unit_sphere_moments(dtype) -> jax.Array:
@@ -423,9 +435,7 @@ def _prepare(raw, mask, ref, shard):
         )
     if not jnp.issubdtype(raw.dtype, jnp.floating):
         raw = raw.astype(float)
-    if mask is None:
-        mask = jnp.ones(raw.shape[:2], bool)
-    mask = _bool_mask(mask)
+    mask = jnp.ones(raw.shape[:2], bool) if mask is None else _bool_mask(mask)
     if mask.shape != raw.shape[:2]:
         raise ValueError(f"mask must be (sensors, samples) = {raw.shape[:2]}, got {mask.shape}")
     valid = mask  # non-finite samples are masked inside the jitted moment pass
@@ -443,8 +453,9 @@ def _prepare(raw, mask, ref, shard):
 
 def _bool_mask(mask) -> jax.Array:
     """A boolean mask; a numeric one only if every entry is 0 or 1 (a float mask with NaN
-    would otherwise count as all-true)."""
-    if isinstance(mask, jax.core.Tracer):
+    would otherwise count as all-true). A boolean array on the device stays there (a GPU batch
+    never copies its samples or mask to the host)."""
+    if isinstance(mask, jax.core.Tracer) or (isinstance(mask, jax.Array) and mask.dtype == bool):
         return jnp.asarray(mask, bool)
     m = np.asarray(mask)
     if m.dtype == bool:
