@@ -74,6 +74,25 @@ def _add_fit_options(
         p.add_argument("--plot", default=None, help=f"write {plot_what} here")
 
 
+def _add_max_iter(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--max-iter",
+        type=_pos_int,
+        default=None,
+        help="the solver's iteration budget (default 200 for lm1-lm3, 256 for optimistix)",
+    )
+
+
+def _solver_options(args: argparse.Namespace) -> dict | None:
+    """solver_options from --max-iter (and accel's --broyden); None when neither is given."""
+    opts = {}
+    if getattr(args, "broyden", False):
+        opts["jacobian"] = "broyden"
+    if getattr(args, "max_iter", None) is not None:
+        opts["max_iter"] = args.max_iter
+    return opts or None
+
+
 def _add_detector_options(p: argparse.ArgumentParser, *, block: bool = True) -> None:
     """The static detector's options, the same on every command; None means automatic."""
     g = p.add_argument_group(
@@ -284,7 +303,7 @@ def run_accel(args: argparse.Namespace) -> int:
         solver=args.solver,
         model=args.model,
         use=args.use,
-        solver_options={"jacobian": "broyden"} if args.broyden else None,
+        solver_options=_solver_options(args),
         sensor_id=args.sensor_id,
         **_accel_detector(args, log.sample_rate),
     )
@@ -307,6 +326,7 @@ def run_mag(args: argparse.Namespace) -> int:
         units=args.units,
         sensor=args.sensor,
         solver=args.solver,
+        solver_options=_solver_options(args),
         sensor_id=args.sensor_id,
     )
     print(f"calib-jax mag: {args.file}")
@@ -346,6 +366,13 @@ def run_batch(args: argparse.Namespace) -> int:
         options.update(g=args.g)  # each log's accelerometer, fitted first
     else:
         options.update(field=args.field, model=args.model or "full")
+    if args.max_iter is not None:
+        if args.sensor == "gyro":
+            raise ValueError(
+                "--max-iter sets the batch fit's budget for --sensor accel and mag; a gyro "
+                "batch fits each log with calib-jax gyro's own solvers"
+            )
+        options["solver_options"] = {"max_iter": args.max_iter}
     files = f"{len(paths)} file{'s' if len(paths) != 1 else ''}"
     # one model for every log of a batch (calib-jax accel / mag choose per log)
     model = f", model {options['model']} for every log" if "model" in options else ""
@@ -661,6 +688,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument("--use", default="means", choices=["means", "samples"])
     a.add_argument("--broyden", action="store_true", help="finite differences + Broyden (paper 1)")
+    _add_max_iter(a)
     _add_fit_options(
         a, "t,ax,ay,az or ax=AccX,ay=AccY,az=AccZ", "the calibration JSON", "a PNG figure"
     )
@@ -687,6 +715,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["mag", "accel"],
         help="which columns to fit (a headerless 3-column file is read as this sensor)",
     )
+    _add_max_iter(m)
     _add_fit_options(
         m, "mx,my,mz or mx=MagX,my=MagY,mz=MagZ", "the calibration JSON", "a PNG figure",
         detector=False,
@@ -814,6 +843,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="accelerometer fit points, as calib-jax accel: static-interval means or samples",
     )
     b.add_argument("--chunk", type=_pos_int, default=256, help="files per batch fit")
+    _add_max_iter(b)
     _add_detector_options(b, block=False)
     b.add_argument(
         "--dask",

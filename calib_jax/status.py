@@ -55,7 +55,8 @@ _MESSAGES = {
     Status.MAX_ITERATIONS: (
         "not converged: the iteration budget ran out, most often because the data do not "
         "determine the model (poses too few or too close together, or motion taken for "
-        "poses); with data that do, raise the solver's max_iter (solver_options in Python)"
+        "poses); with data that do, raise the iteration budget (--max-iter on calib-jax "
+        "accel, mag and batch; solver_options={'max_iter': ...} in Python)"
     ),
     Status.NONFINITE: (
         "not fitted: the residual is NaN or inf at the starting point; remove non-finite "

@@ -722,3 +722,28 @@ def test_marg_names_gravity_held_in_one_direction(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "gravity stays in about one direction" in err, err
     assert "turn about a single axis" not in err
+
+
+def test_max_iter_is_the_flag_the_not_converged_advice_names(tmp_path, capsys):
+    """The advice for a fit out of iterations said "raise the solver's max_iter (solver_options
+    in Python)", and no command had a flag for it (a new user's gesture log). --max-iter now
+    sets the budget of accel, mag and batch, and the advice names it."""
+    out = tmp_path / "a.json"
+    assert main(["accel", str(demo_log_path()), "--max-iter", "2", "--json", str(out)]) == 1
+    d = json.loads(out.read_text())
+    assert (d["iterations"], d["status"]) == (2, "not_converged")
+    assert "--max-iter on calib-jax accel, mag and batch" in capsys.readouterr().out
+    out = tmp_path / "m.json"
+    assert main(["mag", str(mag_demo_log_path()), "--max-iter", "1", "--json", str(out)]) == 1
+    assert json.loads(out.read_text())["iterations"] == 1
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    np.savetxt(logs / "a.csv", cj.load_log(demo_log_path()).acc, delimiter=",")
+    args = ["batch", str(logs), "--no-progress", "--json", str(tmp_path / "b.json")]
+    assert main([*args, "--max-iter", "2"]) == 1
+    (row,) = json.loads((tmp_path / "b.json").read_text())["results"]
+    assert (row["iterations"], row["status"]) == (2, "not_converged")
+    assert main([*args, "--sensor", "gyro", "--max-iter", "2"]) == 2
+    assert "--max-iter sets the batch fit's budget for --sensor accel and mag" in (
+        capsys.readouterr().err
+    )
