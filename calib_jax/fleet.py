@@ -78,7 +78,7 @@ def fit_prepared(
 
     The accelerometer's reference magnitude follows each log's unit unless ``options["g"]``
     gives one, which must then fit that unit (:func:`calib_jax.batch.reference_for_log`; a log
-    it does not fit gets a ``load_error`` entry). Used by :func:`calibrate_files` and by the
+    it does not fit gets a ``not_fitted`` entry). Used by :func:`calibrate_files` and by the
     recorder's multi-device fit.
     """
     import jax
@@ -97,8 +97,8 @@ def fit_prepared(
         if sensor == "accel":
             try:
                 g = reference_for_log(info["static_norm"], g_given, info.get("fit_norm"))
-            except ValueError as exc:
-                out.append({"path": str(name), "status": "load_error", "message": str(exc)})
+            except ValueError as exc:  # read and prepared, but the reference does not fit
+                out.append({"path": str(name), "status": "not_fitted", "message": str(exc)})
                 continue
             units = detect_units(info["static_norm"], info.get("fit_norm"))
             info = {**info, "units": units or "counts", "g": g}
@@ -216,22 +216,23 @@ def _fit_chunk(
             pts, info = prepare_log(log, sensor, model=options.get("model"), use=use, **found)
             prepared.append((p, pts, info))
         except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
-            entry = _load_error(p, exc)
-            if log is not None:  # read, but no observations to fit: keep what the loader found
-                entry["notes"] = list(log.notes)
-            out.append(entry)
+            out.append(_unfitted(p, exc, log))
     out += fit_prepared(prepared, sensor, options)
     order = {str(p): k for k, p in enumerate(paths)}
     return sorted(out, key=lambda d: order[d["path"]])
 
 
-def _load_error(p, exc: Exception) -> dict:
-    """The entry of a file that could not be read or prepared: ValueError/OSError carry a
-    message meant for the user; anything else is a bug in reading this file, reported with
-    its type instead of aborting the other files."""
+def _unfitted(p, exc: Exception, log=None) -> dict:
+    """The entry of a file that was not fitted: ``load_error`` when it could not be read
+    (``log`` None), ``not_fitted`` when it was read but holds nothing the fit can use (then
+    with the loader's notes). ValueError/OSError carry a message meant for the user; anything
+    else is a bug in this file's path, reported with its type instead of aborting the others."""
     known = isinstance(exc, ValueError | OSError)
-    msg = str(exc) if known else f"{type(exc).__name__} while reading {p}: {exc}"
-    return {"path": str(p), "status": "load_error", "message": msg}
+    doing = "reading" if log is None else "preparing"
+    msg = str(exc) if known else f"{type(exc).__name__} while {doing} {p}: {exc}"
+    if log is None:
+        return {"path": str(p), "status": "load_error", "message": msg}
+    return {"path": str(p), "status": "not_fitted", "message": msg, "notes": list(log.notes)}
 
 
 def _gyro_entry(
@@ -243,12 +244,13 @@ def _gyro_entry(
     poses in degrees as ``rms``."""
     from .gyro import calibrate_gyro
 
+    log = None
     try:
         log = load_log(p, columns=columns, sample_rate=sample_rate)
         found = detector_keywords(sample_rate=log.sample_rate, **(detector or {}))
         cal = calibrate_gyro(log, accel_options={"g": options.get("g"), **found})
     except Exception as exc:  # noqa: BLE001 - one bad file must never stop a fleet
-        return _load_error(p, exc)
+        return _unfitted(p, exc, log)
     return {
         "path": str(p),
         "status": cal.status,

@@ -624,7 +624,7 @@ def calibrate_devices(
     static-interval means; magnetometer: the full ellipsoid on every finite sample. ``g``
     defaults to each log's unit (1 g, or 9.80665 for m/s^2; batch.reference_for_log); a
     given ``g`` that contradicts a log's unit is a ValueError naming the log, before anything
-    is written. A log that cannot be prepared gets a ``load_error`` entry; the others are
+    is written. A log that cannot be prepared gets a ``not_fitted`` entry; the others are
     fitted. Each device's sensor is written where a single port writes it
     (:func:`calibration_paths`) as a :class:`calib_jax.BatchRecord` of one entry (load it with
     ``BatchRecord.load``). Returns one dict per device: ``{"sensor_id", "source", "accel":
@@ -661,7 +661,7 @@ def calibrate_devices(
             try:
                 pts, info = prepare_log(lg, kind, **detector)
             except ValueError as exc:
-                results[i][kind] = {"path": str(p), "status": "load_error", "message": str(exc)}
+                results[i][kind] = {"path": str(p), "status": "not_fitted", "message": str(exc)}
                 continue
             if kind == "accel":
                 try:
@@ -710,7 +710,7 @@ def _batch_line(res: dict) -> str:
         e = res.get(kind)
         if e is None:
             continue
-        if e["status"] == "load_error":
+        if e["status"] in ("load_error", "not_fitted"):
             out.append(f"{kind} not calibrated: {e['message']}")
             continue
         p = e["params"]

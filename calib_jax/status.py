@@ -97,8 +97,11 @@ FIT_STATUSES = {
     "not_converged": "the solver's budget ran out; the parameters are its last iterate",
     "failed": "nothing usable: not fitted, a singular or non-finite problem, or a result the "
     "data contradict (see the record's warnings)",
-    "load_error": "a batch entry whose log could not be read or turned into observations; "
-    "nothing was fitted (its message says why)",
+    "not_fitted": "a batch entry whose log was read but holds nothing this fit can use (no "
+    "columns of the sensor, too few poses, a unit the reference does not fit); nothing was "
+    "fitted (its message says why, its notes what the loader found)",
+    "load_error": "a batch entry whose file could not be read; nothing was fitted (its message "
+    "says why)",
 }
 """The status word of every calibration record (accelerometer, ellipsoid, MARG, batch entry),
 best first. Solver codes (:class:`Status`) map onto the first four with :func:`fit_status`."""

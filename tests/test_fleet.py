@@ -135,7 +135,7 @@ def test_reference_magnitude_follows_each_logs_unit(fleet_dir, tmp_path):
     np.testing.assert_allclose(p_ms2[6:], 9.80665 * p_g[6:], rtol=1e-6, atol=1e-9)
     res = list(calibrate_files([src, str(ms2)], g=1.0, progress=False))
     assert res[0]["status"] == "ok"
-    assert res[1]["status"] == "load_error"
+    assert res[1]["status"] == "not_fitted"  # read; the given g does not fit its unit
     assert "does not match the data's unit" in res[1]["message"]
 
 
@@ -273,18 +273,23 @@ def test_the_tables_rms_is_the_single_fits():
 
 
 def test_a_log_read_but_with_too_few_poses_keeps_its_notes(tmp_path):
-    """A log that loads but holds too few poses is a load_error entry whose message says why
-    (the single fit's TooFewPoses); its notes, what the loader found, were dropped (a new
-    user's table showed NaN units and no notes for imucal's six-face session)."""
+    """A log that loads but holds too few poses is a not_fitted entry whose message says why
+    (the single fit's TooFewPoses) and whose notes say what the loader found (a new user's
+    table showed NaN units and no notes for imucal's six-face session). It was labelled
+    load_error, which a new user read as a file the loader could not read (a GGIR AX6 export
+    read right, one pose); a file that cannot be read keeps that word."""
     t = np.arange(3000) / 100.0
     acc = np.tile([0.0, 0.0, 1.0], (3000, 1)) + 1e-3 * np.random.default_rng(0).normal(
         size=(3000, 3)
     )
     path = tmp_path / "one_pose.csv"
     np.savetxt(path, np.column_stack([t, acc]), delimiter=",")  # headerless: the loader notes
-    [e] = calibrate_files([path], progress=False)
-    assert e["status"] == "load_error" and "distinct poses" in e["message"]
+    unreadable = tmp_path / "words.csv"
+    unreadable.write_text("no numbers here\njust words\n")
+    e, u = calibrate_files([path, unreadable], progress=False)
+    assert e["status"] == "not_fitted" and "distinct poses" in e["message"]
     assert any("headerless 4-column file read as t ax ay az" in n for n in e["notes"]), e
+    assert u["status"] == "load_error" and "notes" not in u
 
 
 def test_batch_cli_bad_directory(tmp_path, capsys):

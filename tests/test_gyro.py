@@ -578,7 +578,7 @@ def test_batch_of_gyro_logs_is_calibrate_gyro_per_file(sim, tmp_path, capsys):
     text = capsys.readouterr().out
     assert rc == 1 and "2 of 3 calibrated" in text and "no gyro columns" in text
     rec = BatchRecord.load(out)
-    assert rec.sensor == "gyro" and rec.statuses == ["ok", "ok", "load_error"]
+    assert rec.sensor == "gyro" and rec.statuses == ["ok", "ok", "not_fitted"]
     one = calibrate_gyro(load_log(logs / "a.csv"))
     e = rec.entries[0]
     np.testing.assert_allclose(e["params"][:9], one.matrix.ravel(), rtol=1e-12)
