@@ -292,11 +292,19 @@ def test_marg_on_one_sensors_file_says_what_it_has(tmp_path, capsys):
     """A file of one 3-axis sensor (Faros's ACC.csv: X, Y, Z) given to marg: the error says
     which columns it read and which command fits one sensor (it said only 'map them with
     --columns', and the mapping it led to was refused next for the other sensor)."""
-    f = tmp_path / "ACC.csv"
+    f = tmp_path / "data.csv"
     f.write_text("X,Y,Z\n" + "".join(f"{i},{2 * i},{3 * i}\n" for i in range(30)))
     assert main(["marg", str(f)]) == 2
     err = capsys.readouterr().err
     assert "it has mx (X), my (Y), mz (Z)" in err and "calib-jax accel or calib-jax mag" in err
+    # named for its sensor (Faros's own name, ACC.csv): refused by the name, with the command
+    # that fits it and the two-file form marg takes
+    f.rename(tmp_path / "ACC.csv")
+    assert main(["marg", str(tmp_path / "ACC.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "names the accelerometer, not the magnetometer" in err
+    assert "calibrates with calib-jax accel ACC.csv" in err
+    assert "calib-jax marg Accelerometer.csv Magnetometer.csv" in err
 
 
 def test_cli_prints_a_warning_as_one_line(tmp_path, capsys, monkeypatch):

@@ -1047,3 +1047,45 @@ def test_a_given_sample_rate_replaces_a_time_column_that_does_not_tick(tmp_path)
         load_log(_write(tmp_path, "time,ax,ay,az\n" + good, "g.csv"), sample_rate=50.0).t
         is not None
     )
+
+
+def test_a_file_named_for_one_sensor_gives_its_bare_columns_that_sensor(tmp_path):
+    """Sensor Logger (iOS, Android) writes one file per sensor, Accelerometer.csv,
+    GyroscopeUncalibrated.csv, MagnetometerUncalibrated.csv, each with the columns time,
+    seconds_elapsed, z, y, x (a new user's copy of simorxb/quaternion-complementary-filter).
+    Every file's x, y, z were read as an accelerometer: `diagnose` diagnosed the magnetometer
+    file as an accelerometer, `batch` fitted the gyroscope's as one, and `marg` read the
+    accelerometer's file as a magnetometer. The file's name now says which sensor bare columns
+    hold, and a name that contradicts the command's sensor is refused with what to do."""
+    rng = np.random.default_rng(0)
+    t = 1.7e18 + 1e7 * np.arange(200)  # ns since the epoch, 100 Hz
+    rows = np.column_stack([t, np.arange(200) / 100, rng.normal(size=(200, 3))])
+    for name in ("GyroscopeUncalibrated.csv", "MagnetometerUncalibrated.csv", "data.csv"):
+        np.savetxt(tmp_path / name, rows, delimiter=",", header="time,seconds_elapsed,z,y,x",
+                   comments="", fmt="%.17g")  # fmt: skip
+    gyro = load_log(tmp_path / "GyroscopeUncalibrated.csv")
+    assert gyro.acc is None and gyro.mag is None
+    np.testing.assert_array_equal(gyro.gyro, rows[:, [4, 3, 2]])  # x, y, z by name
+    assert any("names the gyroscope" in n for n in gyro.notes), gyro.notes
+    mag = load_log(tmp_path / "MagnetometerUncalibrated.csv")
+    assert mag.acc is None and mag.mag is not None
+    assert load_log(tmp_path / "MagnetometerUncalibrated.csv", sensor="mag").mag is not None
+    assert load_log(tmp_path / "data.csv").acc is not None  # no name, no change
+    with pytest.raises(ValueError, match=r"names the magnetometer, not the accelerometer.*"
+                       r"--columns ax=x,ay=y,az=z"):  # fmt: skip
+        load_log(tmp_path / "MagnetometerUncalibrated.csv", sensor="accel")
+    explicit = load_log(tmp_path / "MagnetometerUncalibrated.csv", columns="ax=x,ay=y,az=z")
+    assert explicit.acc is not None  # --columns overrides the name
+    # headerless: a 4-column file named for the gyroscope
+    np.savetxt(tmp_path / "xsens_gyro.txt", rows[:, [1, 2, 3, 4]])
+    assert load_log(tmp_path / "xsens_gyro.txt").gyro is not None
+    named = {
+        "xsens_gyro.mat": "gyro",
+        "Accelerometer.csv": "accel",
+        "imu_acc.csv": "accel",
+        "compass_log.csv": "mag",
+        "AccelGyro.csv": None,  # two sensors: no word from the name
+        "image_stack.csv": None,  # 'mag' inside a word is no name
+        "imu.csv": None,
+    }
+    assert {k: F.sensor_named_by(k) for k in named} == named

@@ -1237,8 +1237,12 @@ def diagnose_mag(
         # determined' for mag and declared here, fitted without a word)
         model = "sphere" if cal.model == "sphere" else "full"
         chose.append(
-            f"declared model: {model}, as calib-jax mag chooses for this log ({cal.model}; "
-            "--model full or sphere declares another)"
+            f"declared model: {model}, as calib-jax mag chooses for this log; --model full or "
+            "sphere declares another"
+            if model == cal.model
+            else f"declared model: full, the base containing calib-jax mag's choice for this "
+            f"log ({cal.model}: the diagnosis's bases are sphere and full); --model sphere "
+            "declares another"
         )
     if cal.status in ("failed", "not_converged"):
         return _not_possible(

@@ -10,15 +10,18 @@ Supported:
   sample rate.
 * Headerless numeric text with a ``columns`` mapping such as ``"t,ax,ay,az"`` (the imu_tk
   files). Without a mapping the width decides, and a note names the guess: 3 columns are
-  ``ax ay az`` (``mx my mz`` with ``sensor="mag"``, ``gx gy gz`` with ``sensor="gyro"``), 4 are
-  ``t`` and those, 6 ``ax ay az gx gy gz`` (``ax ay az mx my mz`` with ``sensor="mag"``), 7 ``t``
-  and those, 9 ``ax ay az gx gy gz mx my mz`` and 10 ``t`` and those; any other width is an error
-  that asks for the mapping.
+  ``ax ay az`` (``mx my mz`` with ``sensor="mag"``, ``gx gy gz`` with ``sensor="gyro"``; without
+  ``sensor``, the one sensor the file's name names: ``xsens_gyro.txt``, ``Magnetometer.csv``),
+  4 are ``t`` and those, 6 ``ax ay az gx gy gz`` (``ax ay az mx my mz`` with ``sensor="mag"``),
+  7 ``t`` and those, 9 ``ax ay az gx gy gz mx my mz`` and 10 ``t`` and those; any other width is
+  an error that asks for the mapping. A file named for another sensor than ``sensor`` is
+  refused (a phone's Gyroscope.csv read by ``calib-jax mag``).
 * Vendor layouts read without flags: Empatica E4 (a start-time row and a rate row before the
   samples), a rate in a comment line alone or among settings (``# Config: data_rate = 2000.0
   Hz``), ISO dates and times in a column (read as Unix seconds), a header naming a last field
   only some rows have (Mind Monitor's ``Elements``), a header of ``X,Y,Z`` alone (the caller's
-  ``sensor``, as for a headerless file). Each adds a note.
+  ``sensor`` or the file's name, as for a headerless file: Sensor Logger's
+  ``GyroscopeUncalibrated.csv`` with ``time,seconds_elapsed,z,y,x``). Each adds a note.
 * UTF-8 (with or without a byte-order mark), UTF-16/32 with a byte-order mark, Latin-1; gzip,
   bzip2 or xz compression (found by the file's first bytes, not its name); decimal commas
   (``1,234;0,998``) when the separator is not a comma. Each of these adds a note.
@@ -90,6 +93,57 @@ for _k, _names in _SENSOR_NAMES.items():
 _MATRIX_NAMES = {n: k for k, names in _SENSOR_NAMES.items() for n in names if len(n) > 1}
 
 _SENSORS = {None: "a", "accel": "a", "acc": "a", "mag": "m", "gyro": "g"}
+_SENSOR_LABELS = {"a": "accelerometer", "g": "gyroscope", "m": "magnetometer"}
+_COMMAND_SENSOR = {"a": "accel", "g": "gyro", "m": "mag"}
+# words of a file's name that name one sensor (a phone app's Gyroscope.csv, imu_tk's
+# xsens_gyro.mat, MagnetometerUncalibrated.csv); one-letter names are too common to count
+_FILE_NAME_WORDS = {
+    "a": {"acc", "accel", "accelerometer", "accelerometers", "accelerations"},
+    "g": {"gyr", "gyro", "gyros", "gyroscope", "gyroscopes"},
+    "m": {"mag", "magn", "magnetometer", "magnetometers", "magnetic", "compass"},
+}
+
+
+def sensor_named_by(path: str | os.PathLike | None) -> str | None:
+    """The one sensor ("accel", "gyro" or "mag") a file's name names, word by word
+    (``Gyroscope.csv``, ``xsens_gyro.mat``, ``MagnetometerUncalibrated.csv``); None when it
+    names none or several. Used only for columns that name no sensor (``x, y, z``, or none)."""
+    if path is None:
+        return None
+    stem = Path(os.fsdecode(path)).name.split(".")[0]
+    words = {w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+", stem)}
+    found = [k for k, names in _FILE_NAME_WORDS.items() if words & names]
+    return _COMMAND_SENSOR[found[0]] if len(found) == 1 else None
+
+
+def _sensor_of_bare_columns(path, sensor: str | None, what: str) -> tuple[str | None, str]:
+    """Which sensor columns that name none (``what``: 'columns x, y, z' or 'headerless 3
+    columns') hold: the command's, else the one the file's name names; and why, for the note.
+    A name that names another sensor than the command's is refused: a phone's Gyroscope.csv
+    read by calib-jax mag would be calibrated as a magnetometer."""
+    named = sensor_named_by(path)
+    if named is None or _SENSORS[named] == _SENSORS.get(sensor, "a") and sensor is not None:
+        return sensor, ""
+    if sensor is None:
+        label = _SENSOR_LABELS[_SENSORS[named]]
+        return named, f"the file's name, {Path(path).name}, names the {label}"
+    want, have = _SENSOR_LABELS[_SENSORS[sensor]], _SENSOR_LABELS[_SENSORS[named]]
+    p = _SENSORS[sensor]
+    alone = (
+        f"calib-jax gyro ACC_FILE {Path(path).name}"
+        if named == "gyro"
+        else f"calib-jax {named} {Path(path).name}"
+    )
+    raise ValueError(
+        f"{path}: its {what} name no sensor, and the file's name names the {have}, not the "
+        f"{want} this command reads. For the {want}, give its own file (a phone app writes one "
+        "file per sensor: calib-jax marg Accelerometer.csv Magnetometer.csv, calib-jax gyro "
+        f"Accelerometer.csv Gyroscope.csv); this file calibrates with {alone}; if it does hold "
+        f"the {want}, say so with --columns {p}x=x,{p}y=y,{p}z=z (by position for a headerless "
+        f"file: --columns {p}x,{p}y,{p}z)"
+    )
+
+
 _HUGE = 1e150  # no sensor reads this; its square overflows float64 sums
 _HEAD_CHARS = 1 << 16  # the start of the file searched for the header
 _TAIL_CHARS = 1 << 15  # the end of the file sampled for the separator and the row width
@@ -1369,7 +1423,9 @@ def _assemble(
         bare = {_clean(h): j for j, h in enumerate(header) if _clean(h) in ("x", "y", "z")}
         if len(bare) == 3 and not any(k[0] in "agm" for k in source):
             # 'X,Y,Z' alone (Faros's ACC.csv): one sensor, read as a headerless file's would be
-            cols, why = _guess(3, sensor)
+            which, by_name = _sensor_of_bare_columns(path, sensor, "columns x, y, z")
+            cols, why = _guess(3, which)
+            why = by_name or why
             source.update({c: bare[a] for c, a in zip(cols, "xyz", strict=True)})
             names_xyz = ", ".join(header[bare[a]] for a in "xyz")
             notes.append(
@@ -1377,6 +1433,10 @@ def _assemble(
                 "--columns to override"
             )
     elif mapping is None:
+        by_name = ""
+        if width in (3, 4):  # one sensor's x, y, z (and a time): which, the name may say
+            which, by_name = _sensor_of_bare_columns(path, sensor, f"headerless {width} columns")
+            sensor = which
         guess = _guess(width, sensor)
         if guess is None:
             if width < 3:
@@ -1389,7 +1449,7 @@ def _assemble(
                 f"what they are with --columns, e.g. --columns {_example(width, data, sensor)} "
                 "('_' skips a column; t for a time column, else give --sample-rate)"
             )
-        cols, why = _time_last(*guess, data, path)
+        cols, why = _time_last(guess[0], by_name or guess[1], data, path)
         source = {c: i for i, c in enumerate(cols)}
         notes.append(
             f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
