@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.files import SensorLog, load_log
+from .io.files import OtherSensorsFile, SensorLog, load_log
 from .observations import accel_observations, detector_keywords, screen_samples
 from .padding import stack_rows
 from .progress import progress_bar
@@ -230,6 +230,8 @@ def _unfitted(p, exc: Exception, log=None) -> dict:
     known = isinstance(exc, ValueError | OSError)
     doing = "reading" if log is None else "preparing"
     msg = str(exc) if known else f"{type(exc).__name__} while {doing} {p}: {exc}"
+    if isinstance(exc, OtherSensorsFile):  # read: another sensor's file of the recording
+        return {"path": str(p), "status": "not_fitted", "message": msg}
     if log is None:
         return {"path": str(p), "status": "load_error", "message": msg}
     return {"path": str(p), "status": "not_fitted", "message": msg, "notes": list(log.notes)}

@@ -286,10 +286,13 @@ def test_a_log_read_but_with_too_few_poses_keeps_its_notes(tmp_path):
     np.savetxt(path, np.column_stack([t, acc]), delimiter=",")  # headerless: the loader notes
     unreadable = tmp_path / "words.csv"
     unreadable.write_text("no numbers here\njust words\n")
-    e, u = calibrate_files([path, unreadable], progress=False)
+    gyro = tmp_path / "Gyroscope.csv"  # a phone app's other file: read, not an accelerometer
+    gyro.write_text("time,x,y,z\n" + "".join(f"{k},0.1,0.2,0.3\n" for k in range(50)))
+    e, u, g = calibrate_files([path, unreadable, gyro], progress=False)
     assert e["status"] == "not_fitted" and "distinct poses" in e["message"]
     assert any("headerless 4-column file read as t ax ay az" in n for n in e["notes"]), e
     assert u["status"] == "load_error" and "notes" not in u
+    assert g["status"] == "not_fitted" and "names the gyroscope" in g["message"]
 
 
 def test_batch_cli_bad_directory(tmp_path, capsys):

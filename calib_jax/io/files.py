@@ -116,6 +116,11 @@ def sensor_named_by(path: str | os.PathLike | None) -> str | None:
     return _COMMAND_SENSOR[found[0]] if len(found) == 1 else None
 
 
+class OtherSensorsFile(ValueError):
+    """A file whose name names another sensor than the one asked for, and whose columns name
+    none: read, but not this sensor's (a batch entry ``not_fitted``, not ``load_error``)."""
+
+
 def _sensor_of_bare_columns(path, sensor: str | None, what: str) -> tuple[str | None, str]:
     """Which sensor columns that name none (``what``: 'columns x, y, z' or 'headerless 3
     columns') hold: the command's, else the one the file's name names; and why, for the note.
@@ -134,7 +139,7 @@ def _sensor_of_bare_columns(path, sensor: str | None, what: str) -> tuple[str | 
         if named == "gyro"
         else f"calib-jax {named} {Path(path).name}"
     )
-    raise ValueError(
+    raise OtherSensorsFile(
         f"{path}: its {what} name no sensor, and the file's name names the {have}, not the "
         f"{want} this command reads. For the {want}, give its own file (a phone app writes one "
         "file per sensor: calib-jax marg Accelerometer.csv Magnetometer.csv, calib-jax gyro "
