@@ -169,6 +169,10 @@ class BatchResult(eqx.Module):
     chi2: Float[Array, " S"]
     iterations: Int[Array, " S"]
     n_samples: Int[Array, " S"]
+    stderr_normalised: Float[Array, "S p"] | None = None
+    """Standard errors of the fitted parameters in the normalised problem (units of the data's
+    radius; the magnetometer's packed form, see calib_jax.mag.PARAM_NAMES): what the single
+    fit's poorly-determined rule reads (calib_jax.mag.poorly_determined)."""
 
     @property
     def sensor(self) -> str:
@@ -407,6 +411,7 @@ def _compiled(
             chi2=jnp.where(bad, nan, res.chi2),
             iterations=res.iterations,
             n_samples=jnp.round(S[:, 9, 9]).astype(jnp.int_),  # the count of valid samples
+            stderr_normalised=jnp.where(bad[:, None], nan, res.stderr),
         )
 
     if shard:

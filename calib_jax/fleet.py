@@ -117,14 +117,15 @@ def fit_prepared(
         else:
             r = calibrate_mag_batch(raw, mask, **options)
         entries = r.entries([str(name) for name, _, _ in fit])
+        se_n = np.asarray(r.stderr_normalised)
     ref = {"field": options.get("field")} if sensor == "mag" else {}  # accel: each info's g
-    for e, (_, pts, info) in zip(entries, fit, strict=True):
+    for e, (_, pts, info), se in zip(entries, fit, se_n, strict=True):
         e["rms"] = _norm_rms(e, pts, info, sensor, options)
         if sensor == "accel":
             _judge_accel(e, info, options.get("model") or "accel9")
             out.append({**e, **info, **ref})
         else:
-            out.append({**e, **info, **ref, **_judge_mag(e, pts, options)})
+            out.append({**e, **info, **ref, **_judge_mag(e, pts, se, options)})
     return out
 
 
@@ -154,11 +155,14 @@ def _mag_norms(p: np.ndarray, pts: np.ndarray, options: dict) -> tuple[np.ndarra
     return r, options.get("field") or float(np.mean(r))
 
 
-def _judge_mag(entry: dict, pts: np.ndarray, options: dict) -> dict:
-    """The single fit's checks on a batch entry (:func:`calib_jax.mag.judge_fit`): the batch
-    called 'ok' a phone's walk with a 14 % radial error that calib-jax mag calls failed, 'do
-    not use'. The status, the warnings and, for a downgraded entry, its message."""
-    from .mag import judge_fit
+def _judge_mag(entry: dict, pts: np.ndarray, se_n: np.ndarray, options: dict) -> dict:
+    """The single fit's checks on a batch entry: its poorly-determined rule on the normalised
+    standard errors ``se_n`` (:func:`calib_jax.mag.poorly_determined`; the batch called 'ok'
+    a phone's hand-held log whose full ellipsoid calib-jax mag --model full calls poorly
+    determined) and :func:`calib_jax.mag.judge_fit` (the batch called 'ok' a phone's walk with
+    a 14 % radial error that calib-jax mag calls failed, 'do not use'). The status, the
+    warnings and, for a downgraded entry, its message."""
+    from .mag import POORLY_DETERMINED, judge_fit, poorly_determined
     from .status import is_usable
 
     if not is_usable(entry["status"]):
@@ -166,12 +170,19 @@ def _judge_mag(entry: dict, pts: np.ndarray, options: dict) -> dict:
     p = np.asarray(entry["params"], float)
     centre, W = p[:3], p[3:].reshape(3, 3)
     radius = _mag_norms(p, pts, options)[1]
-    status, warn = judge_fit(
-        pts, centre, W, entry["status"], options.get("model") or "full", radius
-    )
-    out: dict = {"status": status, "warnings": warn}
-    if status != entry["status"]:
-        out["message"] = warn[-1]
+    model = options.get("model") or "full"
+    status, warn = entry["status"], []
+    poor = poorly_determined(se_n, model)
+    if status == "ok" and poor:
+        status = "poorly_determined"
+        warn.append(POORLY_DETERMINED.format(", ".join(poor)))
+    judged, more = judge_fit(pts, centre, W, status, model, radius)
+    warn += more
+    out: dict = {"status": judged, "warnings": warn}
+    if poor:
+        out["poorly_determined"] = poor
+    if judged != entry["status"]:  # the message says why: the last check that downgraded it
+        out["message"] = more[-1] if judged != status and more else warn[0]
     return out
 
 

@@ -78,6 +78,19 @@ MagModel = Literal["sphere", "diag", "full", "auto"]
 
 # normalised standard error (units of the radius) above which a parameter is poorly determined
 POOR_STDERR = 1e-2
+POORLY_DETERMINED = (
+    "poorly determined (normalised std. error above 1 %): {}; cover more orientations"
+)
+
+
+def poorly_determined(se_n, model: str) -> list[str]:
+    """The parameters of ``model`` (its packed, normalised form: units of the data's radius)
+    whose standard error is not finite or exceeds POOR_STDERR; the one rule of the single fit
+    and the batch (:attr:`calib_jax.batch.BatchResult.stderr_normalised`)."""
+    se_n = np.asarray(se_n, float)
+    return [n for n, e in zip(PARAM_NAMES[model], se_n, strict=True) if not e <= POOR_STDERR]
+
+
 # coverage: smallest eigenvalue of the direction scatter (1/3 for a uniform sphere, 0 for a
 # circle in one plane); below FLAT the shape along the normal is unobservable
 FLAT = 0.01
@@ -519,15 +532,10 @@ def calibrate_mag(
             )
         )
     status = fit_status(solver_status, bool(np.all(np.isfinite(W))) and not runaway)
-    names = PARAM_NAMES[chosen]
-    poor = [nm for nm, e in zip(names, se_n, strict=True) if not np.isfinite(e) or e > POOR_STDERR]
+    poor = poorly_determined(se_n, chosen)
     if status == "ok" and poor:
         status = "poorly_determined"
-        warn.append(
-            "poorly determined (normalised std. error above 1 %): "
-            + ", ".join(poor)
-            + "; cover more orientations"
-        )
+        warn.append(POORLY_DETERMINED.format(", ".join(poor)))
 
     frac, ny = _calibrated_coverage(xv, centre, W, status, warn)
     r0 = np.linalg.norm(xv - mean, axis=1)

@@ -379,3 +379,26 @@ def test_a_one_hemisphere_log_is_poorly_determined_in_the_batch_too(tmp_path):
     assert entry["status"] == single.status, entry
     assert entry["poorly_determined"] == single.poorly_determined
     assert any("hemisphere" in w or "all poses lie" in w for w in entry["warnings"])
+
+
+def test_a_poorly_determined_magnetometer_is_so_in_the_batch_too(tmp_path):
+    """The single fit's poorly-determined rule (normalised standard error above 1 %) on a
+    batch entry: `calib-jax batch --sensor mag` called 'ok' a phone's hand-held log whose full
+    ellipsoid `calib-jax mag --model full` calls poorly determined (c_x). Here a 70-degree cap
+    of directions: the single fit and the batch name the same parameters; a full tumble is ok
+    in both."""
+    rng = np.random.default_rng(1)
+    paths, singles = [], []
+    for cap in (70, 180):
+        d = rng.normal(size=(3000, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = d[d[:, 2] >= np.cos(np.radians(cap))][:1500]
+        x = 45 * d * [1.05, 0.97, 1.0] + [20, -10, 30] + 0.4 * rng.normal(size=d.shape)
+        paths.append(tmp_path / f"cap{cap}.csv")
+        np.savetxt(paths[-1], x, delimiter=",", header="mx,my,mz", comments="")
+        singles.append(cj.calibrate_mag(x, model="full"))
+    entries = list(calibrate_files(paths, sensor="mag", model="full", progress=False))
+    assert [s.status for s in singles] == ["poorly_determined", "ok"]
+    assert [e["status"] for e in entries] == ["poorly_determined", "ok"]
+    assert entries[0]["poorly_determined"] == singles[0].poorly_determined == ["l_zz", "c_z"]
+    assert "normalised std. error above 1 %" in entries[0]["message"]
