@@ -925,6 +925,14 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             "table holds none. Give the log the table was made from (every sample, with a "
             "time column or --sample-rate)"
         )
+    held = [ax for ax in range(3) if np.all(g[:, ax] == g[0, ax])]
+    if held:
+        axes = ", ".join(f"{'xyz'[ax]} reads {g[0, ax]:g}" for ax in held)
+        raise ValueError(
+            f"the gyro's {axes} in every sample: a stuck axis or a column that is no reading "
+            "(an Android uncalibrated event's bias estimate is constant); check which columns "
+            "were read as gx, gy, gz (the note above) and map them with --columns"
+        )
     dt, rate = _time_steps(t, sample_rate, len(g), notes)
     _check_turn_axes(g)
     own_accel = accel is None

@@ -1089,3 +1089,32 @@ def test_a_file_named_for_one_sensor_gives_its_bare_columns_that_sensor(tmp_path
         "imu.csv": None,
     }
     assert {k: F.sensor_named_by(k) for k in named} == named
+
+
+def test_an_android_uncalibrated_event_file_reads_its_readings_not_its_bias(tmp_path):
+    """Android's uncalibrated gyroscope and magnetometer events carry x, y, z and the OS's bias
+    estimate; a phone logger wrote them as `t x y z bx by bz` with the bias constant
+    (tyrex-team/benchmarks-attitude-smartphones' Nexus 5). The 7 columns were read as
+    t ax ay az gx gy gz: `calib-jax gyro ACC GYRO` fitted the three constants as the gyro and
+    exited 0, and `calib-jax mag` called the sensor stuck. Three constant last columns after
+    three that move are now that layout, for the command's sensor or the file's name's."""
+    rng = np.random.default_rng(0)
+    t = 0.5 + 0.005 * np.arange(300)
+    xyz = rng.normal(size=(300, 3))
+    rows = np.column_stack([t, xyz, np.tile([0.0085, -0.0040, 0.0688], (300, 1))])
+    np.savetxt(tmp_path / "gyroscope.txt", rows)
+    np.savetxt(tmp_path / "magnetometer.txt", rows)
+    gyro = load_log(tmp_path / "gyroscope.txt")
+    assert gyro.acc is None and gyro.mag is None
+    np.testing.assert_array_equal(gyro.gyro, xyz)
+    assert "three constant columns" in gyro.notes[0], gyro.notes
+    np.testing.assert_array_equal(load_log(tmp_path / "gyroscope.txt", sensor="gyro").gyro, xyz)
+    np.testing.assert_array_equal(load_log(tmp_path / "magnetometer.txt", sensor="mag").mag, xyz)
+    with pytest.raises(ValueError, match="names the gyroscope, not the accelerometer"):
+        load_log(tmp_path / "gyroscope.txt", sensor="accel")
+    # the usual IMU order, whose last three columns move, reads as before
+    rows[:, 4:] = rng.normal(size=(300, 3))
+    np.savetxt(tmp_path / "imu.txt", rows)
+    imu = load_log(tmp_path / "imu.txt")
+    np.testing.assert_array_equal(imu.acc, xyz)
+    np.testing.assert_array_equal(imu.gyro, rows[:, 4:])

@@ -613,3 +613,14 @@ def test_motions_across_a_gap_in_the_time_column_are_left_out():
         t[s + 50 :] += 40.0
     with pytest.raises(ValueError, match="span a gap in the time column"):
         calibrate_gyro(sim.acc, sim.gyro, t=t)
+
+
+def test_a_gyro_axis_that_never_changes_is_refused():
+    """A constant gyro column (a bias estimate read as the gyro) gave a 'calibration' of C ~
+    1e13 +- inf, an 85-110 degree miss and exit 0 on a new user's phone log. A gyro axis that
+    reads one value in every sample is now refused, pointing at the column mapping."""
+    sim = simulate_gyro_log(5, n_poses=12)
+    g = np.array(sim.gyro, float)
+    g[:, 1] = 0.0085
+    with pytest.raises(ValueError, match=r"gyro's y reads 0.0085 in every sample.*--columns"):
+        calibrate_gyro(sim.acc, g, t=sim.t)

@@ -1145,6 +1145,18 @@ def _time_last(cols: list[str], why: str, data: np.ndarray | None, path) -> tupl
     )
 
 
+def _last_three_held(data: np.ndarray | None) -> bool:
+    """The last three columns hold one value each for the whole file while the three before
+    them move: a sensor's readings followed by a constant estimate of its bias."""
+    if data is None or len(data) < 10:
+        return False
+    last, before = data[:, -3:], data[:, -6:-3]
+    ok = np.all(np.isfinite(last), axis=1) & np.all(np.isfinite(before), axis=1)
+    if ok.sum() < 10:
+        return False
+    return bool(np.all(np.ptp(last[ok], axis=0) == 0) and np.all(np.ptp(before[ok], axis=0) > 0))
+
+
 def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
     """Headerless columns by width: the names and the reason given in the note."""
     p = _SENSORS[sensor]
@@ -1443,6 +1455,19 @@ def _assemble(
             which, by_name = _sensor_of_bare_columns(path, sensor, f"headerless {width} columns")
             sensor = which
         guess = _guess(width, sensor)
+        if width in (6, 7) and _last_three_held(data):
+            # Android's uncalibrated events: x, y, z and the OS's bias estimate, constant for
+            # the whole log (a phone's gyroscope.txt, t x y z bx by bz); read as a second
+            # sensor they gave a gyro 'calibration' of constants and exit 0
+            which, named = _sensor_of_bare_columns(
+                path, sensor, f"headerless {width} columns (x, y, z and three constants)"
+            )
+            p = _SENSORS[which]
+            held = "three constant columns (an Android uncalibrated event's bias estimate)"
+            guess = (
+                [*(["t"] if width == 7 else []), p + "x", p + "y", p + "z", "_", "_", "_"],
+                (named or f"sensor {_SENSOR_LABELS[p]}") + f", then {held}, left out",
+            )
         if guess is None:
             if width < 3:
                 raise ValueError(
@@ -1455,7 +1480,7 @@ def _assemble(
                 "('_' skips a column; t for a time column, else give --sample-rate)"
             )
         cols, why = _time_last(guess[0], by_name or guess[1], data, path)
-        source = {c: i for i, c in enumerate(cols)}
+        source = {c: i for i, c in enumerate(cols) if c != "_"}
         notes.append(
             f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
             "to override"
