@@ -21,6 +21,7 @@ of two with zero weights, so logs of similar length share one compilation.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 import warnings as _warnings
@@ -499,17 +500,14 @@ def calibrate_accel(
     notes: list[str] = log_notes + obs.notes
     report, means, pts = obs.report, obs.means, obs.points
 
+    asked = model
     c_s, r_s, model = _check_poses_for(model, obs, sample_rate, notes)
     static_norm = obs.static_norm
-    n_free = int(sum(MODELS[model]))
 
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
     units = _resolve_units(units, report.n_intervals, static_norm, fit_norm)
     g = _reference_magnitude(g, units, static_norm, output_units)
     out_units = accel_output_units(units, output_units)
-    warn += _coverage_warnings(
-        pts, c_s, n_free, _nominal(pts, units, g)[0], pose_table=report.kind == "pose_table"
-    )
 
     # normalise (centre and radius of the points' sphere) and fit
     k = r_s
@@ -522,18 +520,33 @@ def calibrate_accel(
             stacklevel=2,
         )
     xpad, wpad = pad_rows((pts - c_s) / k)
-    res = _compiled(solver, model, opts)(xpad, wpad)
-    # back to raw units: gains and cross terms scale by k / g, biases by k and shift by c_s
-    T = np.concatenate([np.full(6, k / g), np.full(3, k)])
-    params = np.asarray(res.params, float) * T
-    params[6:9] += c_s
-    cov = np.asarray(res.covariance, float) * np.outer(T, T)
-    se_n = np.asarray(res.stderr, float)  # in units of g (unit-radius fit)
-    stderr = se_n * T
-    corr = np.asarray(res.correlation, float)
-    condition = float(res.condition)
-    solver_status = int(res.status)
-    status, poor = _status(solver_status, params, se_n, corr, condition, model, warn)
+    fit = _fit_normalised(solver, model, opts, xpad, wpad, k, g, c_s)
+    if asked == "auto" and _six_would_serve(fit, model):
+        six = _fit_normalised(solver, "accel6", opts, xpad, wpad, k, g, c_s)
+        # six parameters serve where they are determined (every gain and bias within 1 % of
+        # g) and the cross terms the nine did determine explain little: at most twice the
+        # nine's chi2. (An F test has one to three degrees of freedom on 10-12 poses and
+        # passed a hand-held MPU-6050 whose x-z and y-z terms are real: chi2 57x, rms 7.7e-5
+        # -> 5.9e-4; a Nexus 5 turned about x or y alone: 1.4x.)
+        if six.status == "ok" and float(six.res.chi2) <= 2.0 * float(fit.res.chi2):
+            notes.append(
+                "model accel6 (gains and biases; the cross terms held at zero): with nine "
+                f"parameters {', '.join(fit.poor)} were poorly determined, the poses not "
+                "mixing the axes a cross term couples, and the cross terms explain little "
+                f"(chi2 {float(fit.res.chi2):.3g} with them, {float(six.res.chi2):.3g} "
+                "without); --model accel9 insists"
+            )
+            fit, model = six, "accel6"
+    res, params, cov, stderr, corr = fit.res, fit.params, fit.cov, fit.stderr, fit.corr
+    condition, solver_status, status, poor = fit.condition, fit.solver_status, fit.status, fit.poor
+    warn += _coverage_warnings(
+        pts,
+        c_s,
+        int(sum(MODELS[model])),
+        _nominal(pts, units, g)[0],
+        pose_table=report.kind == "pose_table",
+    )
+    warn += fit.warnings
 
     # errors before/after over interval means, noise floor from within-interval scatter
     x_static = x[report.mask & obs.valid]
@@ -714,6 +727,57 @@ def poorly_determined(se_n, model: str) -> list[str]:
     free = np.asarray(MODELS[model])
     bad = ~np.isfinite(se_n) | (np.asarray(se_n) > POOR_STDERR)
     return [PARAM_NAMES[i] for i in range(9) if free[i] and bad[i]]
+
+
+@dataclasses.dataclass(frozen=True)
+class _NormalisedFit:
+    """One model's fit of the normalised points, back in raw units, with its status."""
+
+    res: object
+    params: np.ndarray
+    cov: np.ndarray
+    stderr: np.ndarray
+    corr: np.ndarray
+    condition: float
+    solver_status: int
+    status: str
+    poor: list[str]
+    warnings: list[str]
+
+
+def _fit_normalised(solver, model, opts, xpad, wpad, k, g, c_s) -> _NormalisedFit:
+    """Fit ``model`` to the padded unit-radius points; parameters back in raw units (gains and
+    cross terms scale by k / g, biases by k and shift by the centre c_s)."""
+    res = _compiled(solver, model, opts)(xpad, wpad)
+    T = np.concatenate([np.full(6, k / g), np.full(3, k)])
+    params = np.asarray(res.params, float) * T
+    params[6:9] += c_s
+    se_n = np.asarray(res.stderr, float)  # in units of g (unit-radius fit)
+    corr = np.asarray(res.correlation, float)
+    warn: list[str] = []
+    status, poor = _status(int(res.status), params, se_n, corr, float(res.condition), model, warn)
+    return _NormalisedFit(
+        res=res,
+        params=params,
+        cov=np.asarray(res.covariance, float) * np.outer(T, T),
+        stderr=se_n * T,
+        corr=corr,
+        condition=float(res.condition),
+        solver_status=int(res.status),
+        status=status,
+        poor=poor,
+        warnings=warn,
+    )
+
+
+def _six_would_serve(fit: _NormalisedFit, model: str) -> bool:
+    """The automatic model tries six parameters where nine leave a cross term undetermined
+    (poses that tilt about x or about y, never between: a phone turned on a table edge)."""
+    return (
+        model == "accel9"
+        and fit.status == "poorly_determined"
+        and any(p.startswith("S_") for p in fit.poor)
+    )
 
 
 def _status(solver_status, params, se_n, corr, condition, model, warn) -> tuple[str, list[str]]:
