@@ -12,6 +12,7 @@ interrupted. Nothing here imports JAX until a command runs, so ``--help`` is ins
 from __future__ import annotations
 
 import argparse
+import collections
 import inspect
 import math
 import os
@@ -413,7 +414,9 @@ def run_batch(args: argparse.Namespace) -> int:
     from .calibration import FORMAT_VERSION, _sanitize  # the layout of calib_jax.BatchRecord
 
     out = open(args.json, "w") if args.json else None  # noqa: SIM115
-    n_ok = n_all = 0
+    from .status import is_usable
+
+    n_ok = n_all = n_poor = 0  # usable (as calib-jax accel/mag exit 0), of all, poorly determined
     not_ok: list[str] = []
     table_rows: list[dict] = []
     try:
@@ -429,7 +432,8 @@ def run_batch(args: argparse.Namespace) -> int:
                 out.write(("" if n_all == 0 else ",\n") + json.dumps(_sanitize(r)))
                 out.flush()
             n_all += 1
-            n_ok += r["status"] == "ok"
+            n_ok += is_usable(r["status"])
+            n_poor += r["status"] == "poorly_determined"
             if r["status"] != "ok":
                 not_ok.append(f"{r['path']}: {r['status']}: {r.get('message', '')}")
         if out:
@@ -442,21 +446,26 @@ def run_batch(args: argparse.Namespace) -> int:
         print(line)
     if not (args.json or args.table):  # nothing kept on disk: show the results themselves
         _print_batch_results(table_rows, args.sensor)
-    print(f"{n_ok} of {n_all} calibrated" + (f"; wrote {args.json}" if args.json else ""))
-    headerless = sum(
-        any(n.startswith("headerless") for n in r.get("notes") or []) for r in table_rows
+    poor = f" ({n_poor} poorly determined: usable with care, see why above)" if n_poor else ""
+    print(f"{n_ok} of {n_all} calibrated{poor}" + (f"; wrote {args.json}" if args.json else ""))
+    readings = collections.Counter(
+        n.split(" (", 1)[0].split(" read as ", 1)[-1]
+        for r in table_rows
+        for n in r.get("notes") or []
+        if n.startswith("headerless")
     )
-    if headerless:
+    if readings:
+        how = ", ".join(f"{k} ({v})" for k, v in readings.most_common())
         print(
-            f"note: {headerless} file(s) have no header: their columns were read as the "
-            f"{args.sensor} x, y, z (--sensor and --columns say otherwise)"
+            f"note: {sum(readings.values())} file(s) have no header; their columns were read "
+            f"as {how} (each file's notes say why; --columns says otherwise)"
         )
     if args.table:
         from .display import fleet_rows, write_table
 
         write_table(fleet_rows(table_rows, args.sensor), args.table)
         print(f"wrote {args.table} ({n_all} rows)")
-    return 0 if n_ok == n_all else 1
+    return 0 if n_ok == n_all else 1  # every file usable, as a single fit's exit 0
 
 
 def _plot(cal, path: str | None) -> None:

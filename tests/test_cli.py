@@ -681,7 +681,7 @@ def test_batch_without_outputs_prints_each_result(tmp_path, capsys):
     assert list(printed) == list(PARAM_NAMES)
     np.testing.assert_allclose(list(printed.values()), single.params, rtol=1e-5, atol=1e-7)
     assert "--json OUT.json or --table OUT.csv" in out
-    assert "1 file(s) have no header: their columns were read as the accel x, y, z" in out
+    assert "1 file(s) have no header; their columns were read as ax ay az (1)" in out
     assert main(["batch", str(d), "--no-progress", "--json", str(tmp_path / "b.json")]) == 0
     assert "alpha_x" not in capsys.readouterr().out  # written to the JSON instead
 

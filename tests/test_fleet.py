@@ -402,3 +402,23 @@ def test_a_poorly_determined_magnetometer_is_so_in_the_batch_too(tmp_path):
     assert [e["status"] for e in entries] == ["poorly_determined", "ok"]
     assert entries[0]["poorly_determined"] == singles[0].poorly_determined == ["l_zz", "c_z"]
     assert "normalised std. error above 1 %" in entries[0]["message"]
+
+
+def test_the_batch_counts_a_poorly_determined_fit_as_calibrated(tmp_path, capsys):
+    """`calib-jax accel` exits 0 on a poorly determined fit (usable with care); `calib-jax
+    batch` on the same log said '0 of 1 calibrated' and exited 1 (a new user's phone log).
+    It now counts usable fits, says how many are poorly determined and why, and exits 0 when
+    every file is usable."""
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = d[d[:, 2] >= np.cos(np.radians(70))][:1500]
+    x = 45 * d * [1.05, 0.97, 1.0] + [20, -10, 30] + 0.4 * rng.normal(size=d.shape)
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    np.savetxt(logs / "cap70.csv", x, delimiter=",", header="mx,my,mz", comments="")
+    rc = main(["batch", str(logs), "--sensor", "mag", "--no-progress"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "1 of 1 calibrated (1 poorly determined" in out
+    assert "cap70.csv: poorly_determined: poorly determined" in out
