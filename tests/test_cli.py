@@ -714,6 +714,12 @@ def test_diagnose_chooses_the_magnetometer_of_a_log_without_an_accelerometer(
     err = capsys.readouterr().err
     assert "has no header: its three columns were diagnosed as an accelerometer" in err
     assert "--sensor mag" in err
+    # named for its sensor (a phone's magnetometer.txt): no guess to report, the magnetometer's
+    # diagnosis (the note said 'diagnosed as an accelerometer' whatever was diagnosed)
+    bare.rename(tmp_path / "magnetometer.csv")
+    assert main(["diagnose", str(tmp_path / "magnetometer.csv")]) == 2
+    assert calls[-1] is not None and calls[-1].mag is not None
+    assert "has no header" not in capsys.readouterr().err
 
 
 def test_marg_names_gravity_held_in_one_direction(tmp_path, capsys):

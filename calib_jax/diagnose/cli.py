@@ -26,7 +26,10 @@ def run(args: argparse.Namespace) -> int:
     guessed = ""
     if args.sensor is None:  # the accelerometer, unless the log has only a magnetometer
         args.sensor = "mag" if log.acc is None and log.mag is not None else "accel"
-        if any(n.startswith(("headerless 3-column", "headerless 4-column")) for n in log.notes):
+        if args.sensor == "accel" and any(  # a guess: neither a header nor the name said
+            n.startswith(("headerless 3-column", "headerless 4-column")) and "names the" not in n
+            for n in log.notes
+        ):
             guessed = (
                 f"note: {args.file} has no header: its three columns were diagnosed as an "
                 "accelerometer; for a magnetometer give --sensor mag"
