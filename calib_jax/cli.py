@@ -693,7 +693,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         choices=["auto", "accel9", "accel6"],
         help="paper 1's nine parameters, or six (no cross terms) for six-face logs; default "
-        "auto: nine where the log holds nine distinct poses, else six",
+        "auto: nine where the log holds nine distinct poses and determines them, else six",
     )
     a.add_argument("--use", default="means", choices=["means", "samples"])
     a.add_argument("--broyden", action="store_true", help="finite differences + Broyden (paper 1)")
