@@ -579,7 +579,11 @@ def _split_columns(spec: str | None, prefix: str) -> tuple[dict | None, dict | N
     if not mapping or not any(k.startswith(prefix) for k in mapping):
         return mapping, None
     other = {k: v for k, v in mapping.items() if k.startswith(prefix) or k == "t"}
-    return {k: v for k, v in mapping.items() if not k.startswith(prefix)}, other
+    acc = {k: v for k, v in mapping.items() if not k.startswith(prefix)}
+    # a mapping of the second file alone (--columns t,gx,gy,gz,_,_,_) leaves the
+    # accelerometer's file to its header or the guess: its time alone maps no sensor (it was
+    # read with t only and refused: "no sensor columns recognised in ['0', '1', '2', '3']")
+    return (acc if any(k != "t" for k in acc) else None), other
 
 
 def _two_files(args: argparse.Namespace, second: str, sensor: str):
@@ -588,7 +592,13 @@ def _two_files(args: argparse.Namespace, second: str, sensor: str):
     from .io.files import join_logs
 
     acc_columns, own = _split_columns(args.columns, sensor[0])
-    log = load_args(args, sensor="accel", columns=acc_columns)
+    log = load_input(  # None: its header or the guess (load_args would take --columns whole)
+        args.file,
+        columns=acc_columns,
+        sample_rate=args.sample_rate,
+        sensor="accel",
+        instance=args.instance,
+    )
     other = load_input(  # its own columns only (None: its header or the guess)
         second, columns=own, sample_rate=args.sample_rate, sensor=sensor, instance=args.instance
     )

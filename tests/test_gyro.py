@@ -242,6 +242,11 @@ def test_cli_takes_the_two_xsens_files_and_apply_corrects_the_gyro(tmp_path, cap
     argv = ["gyro", str(demo_log_path()), str(gyro_demo_log_path()), "--columns", cols]
     assert main([*argv, "--json", str(mapped)]) == 0
     np.testing.assert_array_equal(GyroCalibration.load(mapped).matrix, saved.matrix)
+    # a mapping of the gyro file alone leaves the accelerometer's file to its own reading (it
+    # was read with t only and refused, "no sensor columns recognised", blaming that file)
+    argv = ["gyro", str(demo_log_path()), str(gyro_demo_log_path()), "--columns", "t,gx,gy,gz"]
+    assert main([*argv, "--json", str(mapped)]) == 0
+    np.testing.assert_array_equal(GyroCalibration.load(mapped).matrix, saved.matrix)
     # a gyro file 10 rows short, on the same clock: joined by its time column, the
     # accelerometer's last rows left out; one of another recording (its times 1000 s later)
     # is refused, naming both files
