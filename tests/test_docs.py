@@ -30,3 +30,20 @@ def test_site_builds_strict(tmp_path):
     # the API page holds the docstrings: a field's doc and a method's
     assert "Outcome of" in page and "Paper 1 Table 1 layout" in page
     assert (tmp_path / "site" / "formats" / "index.html").exists()
+
+
+def test_performance_tables_are_their_benchmark_json():
+    """docs/performance.md's batch tables are written from the committed JSON by
+    benchmarks/tables.py: a re-run benchmark without its table, or a number edited by hand,
+    fails here (the hand-written table had dropped the 10,000-sensor sharded row)."""
+    import importlib.util
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("tables", root / "benchmarks" / "tables.py")
+    tables = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tables)
+    text = (root / "docs" / "performance.md").read_text()
+    assert tables.render(text) == text, "run .venv/bin/python benchmarks/tables.py"
+    # not vacuous: a changed number in the JSON changes the table
+    results = root / "benchmarks" / "results"
+    assert "| 1000 | H200 | 0.00626 |" in tables.batch_gpu(results)

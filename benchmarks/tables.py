@@ -1,0 +1,114 @@
+"""The tables of docs/performance.md that come from committed benchmark JSON, written from it.
+
+    .venv/bin/python benchmarks/tables.py           # rewrite the tables in docs/performance.md
+    .venv/bin/python benchmarks/tables.py --check   # exit 1 if a table differs from its JSON
+
+Each table sits between ``<!-- generated: NAME -->`` and ``<!-- end: NAME -->``; the prose
+around it is written by hand. tests/test_docs.py runs the check, so a benchmark re-run without
+its table (or a table edited by hand) fails the suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+DOC = Path(__file__).resolve().parents[1] / "docs" / "performance.md"
+
+
+def _g(x: float) -> str:
+    """Three significant figures, trailing zeros kept (0.120, 8.70, 0.000793)."""
+    return f"{x:#.3g}".rstrip(".")
+
+
+def _ratio(x: float) -> str:
+    return f"{x:.0f}x" if x >= 10 else f"{x:.2g}x"
+
+
+def _batch_row(r: dict, label: str) -> str:
+    return (
+        f"| {label} | {_g(r['calib_jax_ms_per_sensor'])} | {r['calib_jax_first_s']:.1f} | "
+        f"{_g(r['scipy_ms_per_sensor'])} | {_ratio(r['speedup_vs_scipy'])} | "
+        f"{_g(r['optimistix_ms_per_sensor'])} | {_ratio(r['speedup_vs_optimistix'])} |"
+    )
+
+
+def batch_cpu(results: Path = RESULTS) -> str:
+    """This machine's batch rows (batch.json), the sharded run's after the size it shares."""
+    head = (
+        "| sensors | calib_jax ms/sensor | first call s | SciPy lm loop ms/sensor | ratio | "
+        "optimistix vmap ms/sensor | ratio |\n|---|---|---|---|---|---|---|"
+    )
+    rows = json.loads((results / "batch.json").read_text())["rows"]
+    sharded = json.loads((results / "batch_sharded.json").read_text())
+    lines = [head]
+    for r in rows:
+        lines.append(_batch_row(r, str(r["sensors"])))
+        for s in sharded["rows"]:
+            if s["sensors"] == r["sensors"]:
+                label = f"{s['sensors']}, sharded over {s['devices']} host devices"
+                lines.append(_batch_row(s, label))
+    return "\n".join(lines)
+
+
+def batch_gpu(results: Path = RESULTS) -> str:
+    """The GPU run's rows (batch_gpu.json) and that machine's CPU baseline
+    (gpu_host_cpu/batch.json), with the input bandwidth each fit reached."""
+    head = (
+        "| sensors | device | calib_jax ms/sensor | first call s | SciPy lm loop ms/sensor | "
+        "ratio | optimistix vmap ms/sensor | ratio | input GB/s |\n"
+        "|---|---|---|---|---|---|---|---|---|"
+    )
+    lines = [head]
+    for path, device in (
+        (results / "batch_gpu.json", None),
+        (results / "gpu_host_cpu" / "batch.json", "that machine's CPU"),
+    ):
+        d = json.loads(path.read_text())
+        m = d["machine"]
+        name = device or m["device_kind"].removeprefix("NVIDIA ")
+        if device:
+            name += f" ({m['host_cores']} cores)"
+        for r in d["rows"]:
+            row = _batch_row(r, f"{r['sensors']} | {name}")
+            lines.append(f"{row} {r['input_gb_per_s']:.3g} |")
+    return "\n".join(lines)
+
+
+TABLES = {"batch-cpu": batch_cpu, "batch-gpu": batch_gpu}
+
+
+def render(text: str, results: Path = RESULTS) -> str:
+    """``text`` with every generated table written anew from the JSON."""
+    for name, make in TABLES.items():
+        pattern = re.compile(
+            rf"(<!-- generated: {name} -->\n).*?(\n<!-- end: {name} -->)", flags=re.DOTALL
+        )
+        if not pattern.search(text):
+            raise ValueError(f"{DOC.name} has no '<!-- generated: {name} -->' block")
+        text = pattern.sub(lambda m, make=make: m.group(1) + make(results) + m.group(2), text)
+    return text
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--check", action="store_true", help="exit 1 if a table is out of date")
+    args = ap.parse_args()
+    text = DOC.read_text()
+    new = render(text)
+    if args.check:
+        if new != text:
+            print(f"{DOC} is out of date: run benchmarks/tables.py", file=sys.stderr)
+            return 1
+        return 0
+    DOC.write_text(new)
+    print(f"wrote the tables of {DOC}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
