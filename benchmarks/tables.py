@@ -79,7 +79,36 @@ def batch_gpu(results: Path = RESULTS) -> str:
     return "\n".join(lines)
 
 
-TABLES = {"batch-cpu": batch_cpu, "batch-gpu": batch_gpu}
+_CLI_ROWS = (
+    ("accel", "`accel` Xsens"),
+    ("mag", "`mag` CK-Explorer"),
+    ("marg", "`marg` CK-Explorer"),
+    ("diagnose", "`diagnose --sensor accel` Xsens"),
+)
+
+
+def cli(results: Path = RESULTS) -> str:
+    """benchmarks/cli.py's rows (cli.json): each command cold and warm, its target, and the
+    SciPy script's time where there is one."""
+    d = json.loads((results / "cli.json").read_text())["rows"]
+    lines = [
+        "| command | cold s | warm s | issue 17 target warm / cold s | SciPy script s | "
+        "warm / SciPy |",
+        "|---|---|---|---|---|---|",
+        f"| `--help` (slowest of {len(d['--help']['per_command_s'])}) | - | "
+        f"{d['--help']['warm_s']:.2f} | {d['--help']['target_s']:g} | - | - |",
+    ]
+    for key, label in _CLI_ROWS:
+        r = d[key]
+        target = f"{r['target_warm_s']:.1f}" + (
+            f" / {r['target_cold_s']:.1f}" if r.get("target_cold_s") else ""
+        )
+        scipy = f"{r['scipy_s']:.2f} | {r['warm_over_scipy']:.1f}x" if r.get("scipy_s") else "- | -"
+        lines.append(f"| {label} | {r['cold_s']:.1f} | {r['warm_s']:.2f} | {target} | {scipy} |")
+    return "\n".join(lines)
+
+
+TABLES = {"cli": cli, "batch-cpu": batch_cpu, "batch-gpu": batch_gpu}
 
 
 def render(text: str, results: Path = RESULTS) -> str:
