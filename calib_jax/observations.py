@@ -201,6 +201,17 @@ def accel_observations(
         )
     means = report.means()
     points = means if use == "means" else x[report.mask]
+    lengths = np.array([iv.stop - iv.start for iv in report.intervals])
+    if sample_rate is None and report.kind == "log" and np.median(lengths) < SHORT_POSE:
+        # no clock: the detector judged poses in samples, and took stretches of a few samples
+        # for rests (a gesture log without a time column: 50 'poses' of median 3 samples)
+        warnings.append(
+            f"the log has no time column and no rate, so the poses were found in samples: "
+            f"{report.n_intervals} of {int(lengths.min())}-{int(lengths.max())} samples "
+            f"(median {np.median(lengths):.0f}), too short to be held rests at a usual rate; "
+            "give the rate (--sample-rate HZ, sample_rate= in Python) so poses are judged in "
+            "seconds, or record poses held still for a few seconds"
+        )
     return AccelObservations(
         points=points,
         means=means,
@@ -210,6 +221,9 @@ def accel_observations(
         warnings=warnings,
         notes=notes,
     )
+
+
+SHORT_POSE = 10  # samples: the median pose of a log without a clock below this is no rest
 
 
 def detection_found(report: StaticReport, sample_rate: float | None) -> str:

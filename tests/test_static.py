@@ -278,3 +278,26 @@ def test_a_log_cut_short_says_too_few_poses_not_no_interval():
         cj.calibrate_accel(x, sample_rate=100.0)
     assert "no static interval" not in str(e.value)
     assert "the most distinct poses any found was 5" in str(e.value)
+
+
+def test_poses_of_a_few_samples_in_a_log_without_a_clock_are_named():
+    """A gesture log with no time column (everywhereml's ax..gz, target): the detector,
+    working in samples, took 50 stretches of median 3 samples for rests, and the fit failed
+    with advice about poses and iterations, never about the missing rate. A log without a rate
+    whose poses have a median under 10 samples now gets a warning asking for --sample-rate;
+    the same poses held 100 samples do not."""
+    from calib_jax.observations import accel_observations
+    from calib_jax.simulate import paper48_directions, random_params, simulate_accel
+
+    for per_pose, warned in ((6, True), (100, False)):
+        log = simulate_accel(random_params(0), paper48_directions(), samples_per_pose=per_pose,
+                             transition_samples=4, noise=2e-3, rng=0)  # fmt: skip
+        obs = accel_observations(log.raw)
+        assert obs.report.n_intervals == 48
+        found = [w for w in obs.warnings if "no time column and no rate" in w]
+        assert bool(found) is warned, obs.warnings
+        if warned:
+            assert "48 of" in found[0] and "--sample-rate HZ" in found[0], found
+        # with a rate the poses are judged in seconds: no such warning
+        rated = accel_observations(log.raw, sample_rate=100.0).warnings
+        assert not any("no time column" in w for w in rated)
