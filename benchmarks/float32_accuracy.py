@@ -30,6 +30,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _device import describe, label, suffix  # noqa: E402
 from jax.flatten_util import ravel_pytree  # noqa: E402
 
 from calib_jax import pipeline as pl  # noqa: E402
@@ -116,26 +117,29 @@ def main(argv=None):
         }
         for k, v in rows.items()
     }
+    info = describe()
+    out = OUT.with_name(f"float32_accuracy{suffix(info)}.json")
     print(
         f"float32 against float64 over {args.boards} simulated boards "
-        f"({not_converged} float32 fits not converged)"
+        f"({not_converged} float32 fits not converged); {label(info)}"
     )
     print(f"{'quantity':<16} {'median':>10} {'p90':>10} {'max':>10}")
     for k, s in summary.items():
         print(f"{k:<16} {s['median']:>10.2e} {s['p90']:>10.2e} {s['max']:>10.2e}")
-    OUT.parent.mkdir(exist_ok=True)
-    OUT.write_text(
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(
         json.dumps(
             {
                 "boards": args.boards,
                 "not_converged": not_converged,
                 "jax": jax.__version__,
+                "machine": info,
                 "summary": summary,
             },
             indent=2,
         )
     )
-    print(f"wrote {OUT}")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _device import describe, label, suffix  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
 from calib_jax.accel import _compiled, initial_guess  # noqa: E402
@@ -89,9 +90,10 @@ def main() -> None:
             params=ref.x.tolist(),
         )
     base = rows["scipy lm"]["median_ms"]
+    info = describe()
     print(
         f"single fit, {len(x)} samples, median of {args.repeats} warm runs "
-        f"({platform.machine()}, jax {jax.__version__})"
+        f"({platform.machine()}; {label(info)})"
     )
     print(
         f"{'solver':<22}{'median ms':>10}{'vs scipy lm':>13}{'compile s':>11}{'iter/nfev':>11}"
@@ -106,12 +108,16 @@ def main() -> None:
         )
     out = Path(__file__).parent / "results"
     out.mkdir(exist_ok=True)
-    (out / "single_fit.json").write_text(
+    name = f"single_fit{suffix(info)}.json"
+    (out / name).write_text(
         json.dumps(
-            dict(samples=len(x), repeats=args.repeats, jax=jax.__version__, rows=rows), indent=2
+            dict(
+                samples=len(x), repeats=args.repeats, jax=jax.__version__, machine=info, rows=rows
+            ),
+            indent=2,
         )
     )
-    print(f"wrote {out / 'single_fit.json'}")
+    print(f"wrote {out / name}")
 
 
 if __name__ == "__main__":
