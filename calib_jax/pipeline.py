@@ -103,7 +103,7 @@ def _full_float32(f: Callable) -> Callable:
     On a GPU, JAX multiplies float32 matrices in TF32 (a 10-bit mantissa) unless told
     otherwise: the float32 fits here then stopped far from the float64 optimum. Measured on an
     H200 over 40 boards (benchmarks/float32_accuracy.py, largest values): magnetometer
-    parameters 33 % of a standard error off (0.5 % on the CPU), the implicit derivative 3.2e-3
+    parameters 33 % of a standard error off (0.2 % on the CPU), the implicit derivative 3.2e-3
     of its scale (5.2e-5), roll/pitch/yaw 0.054 deg (0.0018), one fit of 40 not converged.
     float64 and the CPU are unchanged (their products are exact already)."""
 
