@@ -963,7 +963,11 @@ class MagCalibration(SensorCalibration):
         mag = self.sensor == "mag"
         out = [
             f"model {self.model} on {self.n_samples} samples "
-            f"({100 * self.coverage:.0f} % of the sphere of directions covered)",
+            + (
+                f"({100 * self.coverage:.0f} % of the sphere of directions covered)"
+                if np.isfinite(self.coverage)
+                else "(coverage not measured: no shell to measure it on)"
+            ),
             ("center (hard iron): " if mag else "center (bias): ")
             + ", ".join(f"{v:.6g} +- {e:.2g}" for v, e in zip(c, sc, strict=True))
             + f" {unit}",

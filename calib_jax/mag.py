@@ -565,6 +565,7 @@ def calibrate_mag(
             "slow tumble through all orientations"
         )
         status = "failed"
+        frac = float("nan")  # directions about a 'centre' that is the field: no coverage
 
     def full_rms() -> float:
         """RMS radial error (percent of the data radius) of the full ellipsoid: whether the

@@ -501,6 +501,7 @@ def test_a_stuck_axis_is_named():
 def test_a_magnetometer_that_never_turned_is_no_calibration():
     """uBot's LSM303 'no movement' log (512 samples): calib-jax mag reported a hard iron (the
     field itself), a radius of 1.8 uT, 26 % coverage, status poorly_determined and exit 0.
+    (Its coverage is now NaN, 'not measured'.)
     A log spreading by no more than 3x its sample-to-sample noise, on no shell, fails and says
     why; a shuffled cap of a tumble (no time order, on its shell) is not refused by this."""
     rng = np.random.default_rng(5)
@@ -508,6 +509,10 @@ def test_a_magnetometer_that_never_turned_is_no_calibration():
     cal = _fit(still)
     assert cal.status == "failed"
     assert any("the field barely changes" in w for w in cal.warnings), cal.warnings
+    # nor any coverage: directions about a 'centre' that is the field spread over the sphere
+    # (a GGIR AX6 log's 'magnetometer', a still gyro, was '83 % of the sphere covered')
+    assert np.isnan(cal.coverage)
+    assert "(coverage not measured: no shell to measure it on)" in cal.report()
     x = _tumble(seed=1)
     cap = x[(x - CENTRE) @ np.array([0.0, 0.0, 1.0]) > 0]
     cap = cap[rng.permutation(len(cap))]
