@@ -95,13 +95,6 @@ _MATRIX_NAMES = {n: k for k, names in _SENSOR_NAMES.items() for n in names if le
 _SENSORS = {None: "a", "accel": "a", "acc": "a", "mag": "m", "gyro": "g"}
 _SENSOR_LABELS = {"a": "accelerometer", "g": "gyroscope", "m": "magnetometer"}
 _COMMAND_SENSOR = {"a": "accel", "g": "gyro", "m": "mag"}
-# words of a file's name that name one sensor (a phone app's Gyroscope.csv, imu_tk's
-# xsens_gyro.mat, MagnetometerUncalibrated.csv); one-letter names are too common to count
-_FILE_NAME_WORDS = {
-    "a": {"acc", "accel", "accelerometer", "accelerometers", "accelerations"},
-    "g": {"gyr", "gyro", "gyros", "gyroscope", "gyroscopes"},
-    "m": {"mag", "magn", "magnetometer", "magnetometers", "magnetic", "compass"},
-}
 
 
 def sensor_named_by(path: str | os.PathLike | None) -> str | None:
@@ -112,8 +105,11 @@ def sensor_named_by(path: str | os.PathLike | None) -> str | None:
         return None
     stem = Path(os.fsdecode(path)).name.split(".")[0]
     words = {w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+", stem)}
-    found = [k for k, names in _FILE_NAME_WORDS.items() if words & names]
-    return _COMMAND_SENSOR[found[0]] if len(found) == 1 else None
+    # the words that name a sensor in a column name (one-letter ones are not among them), or
+    # their plural (gyros.csv)
+    found = {_SENSOR_WORDS.get(w) or _SENSOR_WORDS.get(w.removesuffix("s")) for w in words}
+    found.discard(None)
+    return _COMMAND_SENSOR[found.pop()] if len(found) == 1 else None
 
 
 class OtherSensorsFile(ValueError):
@@ -127,7 +123,7 @@ def _sensor_of_bare_columns(path, sensor: str | None, what: str) -> tuple[str | 
     A name that names another sensor than the command's is refused: a phone's Gyroscope.csv
     read by calib-jax mag would be calibrated as a magnetometer."""
     named = sensor_named_by(path)
-    if named is None or _SENSORS[named] == _SENSORS.get(sensor, "a") and sensor is not None:
+    if named is None or (sensor is not None and _SENSORS[named] == _SENSORS[sensor]):
         return sensor, ""
     if sensor is None:
         label = _SENSOR_LABELS[_SENSORS[named]]
