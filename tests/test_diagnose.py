@@ -213,6 +213,19 @@ def test_effect_outside_the_catalogue_is_reported_unexplained():
     assert any("time" in n for n in d.notes)
 
 
+def test_an_effect_too_large_for_the_sensor_is_named_not_hidden():
+    """A bias drift of 0.25 g over the log explains the residual (BIC and the null test pass)
+    but exceeds the plausibility bound (0.1 of g over the log), so it is not accepted. The
+    notes used to say "no catalogue effect explains it"; they must name the effect, what it
+    would do to the rms, why it is refused and where else to look."""
+    _, d = run_accel(("bias_drift",), size=0.25)
+    assert d.verdict == "unexplained_structure" and d.effects == []
+    assert not any("no catalogue effect explains it" in n for n in d.notes), d.notes
+    [note] = [n for n in d.notes if n.startswith("bias_drift would take the rms")]
+    assert "beyond 0.1" in note and "relative to g" in note and "cause outside the sensor" in note
+    assert not any("pauses in a motion" in n for n in d.notes), d.notes  # the drift explains it
+
+
 def test_too_few_poses_is_its_own_verdict():
     _, d = run_accel((), poses=10)
     assert d.verdict == "not_possible"

@@ -858,6 +858,36 @@ def regress_drivers(e, drivers, floor) -> list[dict]:
     return out
 
 
+OUTSIDE_CAUSES = {
+    "accel": "the board moving or tilting on its support between poses, a log that joins two "
+    "sessions, a mount that heats or bends",
+    "mag": "a magnet, a current or iron moving near the board, a log that joins two places",
+}
+
+
+def _too_large_to_accept(rounds, rms, sensor, scale_to_output, units) -> tuple[list[str], float]:
+    """Notes for the last round's candidates that explain the residual (they converge and
+    pass BIC and the null test) but fail plausibility, and the lowest rms they reach (inf if
+    none): without them the user read "no catalogue effect explains it", and that the poses
+    looked like pauses in a motion, beside a drift that took the rms from 30 to 5 mg and was
+    refused only for being larger than a sensor's bias moves (issue 15's power study: every
+    accelerometer effect at 10-20x the floor of a correlated log)."""
+    out, best = [], float("inf")
+    for e in rounds[-1] if rounds else []:
+        t = e.get("tests", {})
+        if "implausible" in e and t.get("converged") and t.get("bic") and t.get("null"):
+            ref = "g" if sensor == "accel" else "the field"
+            out.append(
+                f"{e['effect']} would take the rms from {rms * scale_to_output:.3g} to "
+                f"{e['rms'] * scale_to_output:.3g} {units} (BIC gain {e['delta_bic']:.0f}) but "
+                f"is larger than the sensor's own effect can be ({e['implausible']}; relative "
+                f"to {ref}), so it is not accepted; look for a cause outside the sensor: "
+                f"{OUTSIDE_CAUSES[sensor]}"
+            )
+            best = min(best, e["rms"])
+    return out, best
+
+
 def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     white, allan = floors
     floor = (
@@ -884,19 +914,24 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     drivers_above = [s for s in structure if s["above_floor"]]
     excess = np.isfinite(floor) and rms_after > 2.0 * floor
     unexplained = bool(drivers_above) or bool(excess)
+    too_large, rms_if_accepted = _too_large_to_accept(
+        res["rounds"], fin["rms"], obs.sensor, scale_to_output, units
+    )
     for s in drivers_above:
         notes.append(
             f"residual follows {s['driver']} (p = {s['p_value']:.1e}, size "
             f"{s['size'] * scale_to_output:.3g} {units}, {100 * s['share_of_variance']:.0f} % of "
-            "its variance) and no catalogue effect explains it"
+            f"its variance) and no {'plausible ' if too_large else ''}catalogue effect explains it"
         )
+    if unexplained:
+        notes += too_large
     if excess and not drivers_above:
         notes.append(
             f"rms after ({rms_after * scale_to_output:.3g} {units}) is "
             f"{rms_after / floor:.1f}x the floor with no driver it follows: excess scatter "
             "between observations (disturbed poses, or a floor that underestimates the noise)"
         )
-    if obs.sensor == "accel" and rms_before >= REST_RMS_LIMIT:
+    if obs.sensor == "accel" and min(rms_before, rms_if_accepted) >= REST_RMS_LIMIT:
         notes.append(
             f"the poses leave {rms_before:.2g} of g after the base fit (held rests leave under "
             f"{REST_RMS_LIMIT:g}): they look like pauses in a motion, and the floor measured "
