@@ -564,9 +564,10 @@ def _effect_of(effect, sl, fit) -> tuple[np.ndarray, np.ndarray]:
     return coef, np.where(gain, np.hypot(se, fit["stderr"][0]), se)
 
 
-def _honest_tests(entry, d, fits, jack, held_cur, block, w, degree) -> None:
+def _honest_tests(entry, d, fits, jack, held_cur, block, w, degree, tried) -> None:
     """Add the held-out, halves and honest-significance tests (:mod:`.honest`) to a
-    candidate's entry, from its halves (``fits``) and leave-one-block-out refits ``jack``."""
+    candidate's entry, from its halves (``fits``) and leave-one-block-out refits ``jack``;
+    ``tried``: the round's number of candidates."""
     c = entry["effect"]
     sl = _indices(_slots(c, degree))
     sl = sl[d["free"][sl]]
@@ -578,6 +579,7 @@ def _honest_tests(entry, d, fits, jack, held_cur, block, w, degree) -> None:
         np.stack([_effect_of(c, sl, f)[0] for f in jack]),
         np.sqrt(se1**2 + se2**2),
         se,
+        tried,
     )
     held = held_out_rms([f["e"] for f in jack], block, w)
     entry["held_out_gain"] = 1.0 - held / held_cur
@@ -703,7 +705,7 @@ def _run(
                 jack_cur = _jackknife(P, cur["theta"], w, free, block)
             jack = _jackknife(P, fit["theta"], w, d["free"], block)
             held_cur = held_out_rms([f["e"] for f in jack_cur], block, w)
-            _honest_tests(entries[c], d, fits, jack, held_cur, block, w, degree)
+            _honest_tests(entries[c], d, fits, jack, held_cur, block, w, degree, len(remaining))
             if all(entries[c]["tests"].values()):
                 best = (c, fit, d["free"], jack)
                 break

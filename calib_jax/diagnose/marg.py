@@ -166,7 +166,7 @@ def _timing_start(a, t_obs, tm, m, R) -> float:
     return float(shifts[np.argmin(spread)])
 
 
-def _judge(c, fits: list[dict], i: int, nb: list[float], cur: dict, held_cur, block, w, P_best):
+def _judge(c, fits, i, nb, cur, held_cur, block, w, P_best, tried):
     """One candidate's round entry: its fit (``fits[i]``), the two halves' fits after it,
     the :data:`JACKKNIFE_BLOCKS` leave-one-block-out fits after those and its null fits after
     those, against the current model ``cur`` and the null baselines' BIC ``nb``; accepted
@@ -184,6 +184,7 @@ def _judge(c, fits: list[dict], i: int, nb: list[float], cur: dict, held_cur, bl
         np.stack([f["theta"][sl] for f in jack]),
         np.sqrt(h1["stderr"][sl] ** 2 + h2["stderr"][sl] ** 2),
         fit["stderr"][sl],
+        tried,
     )
     held = held_out_rms([f["e"] for f in jack], block, w)
     rot = math.degrees(float(np.linalg.norm(fit["theta"][:3])))
@@ -397,7 +398,8 @@ def diagnose_marg(
         fits = _run(rows, a, tob, tm)
         nb = [f["bic"] for f in fits[nb0:jb0]]
         held_cur = held_out_rms([f["e"] for f in fits[jb0:]], block, w)
-        log = [_judge(c, fits, idx[c], nb, cur, held_cur, block, w, P_best) for c in remaining]
+        n = len(remaining)
+        log = [_judge(c, fits, idx[c], nb, cur, held_cur, block, w, P_best, n) for c in remaining]
         if not rounds:
             log.insert(0, perm)  # the permutation search, accepted or not, in the JSON
         rounds.append(log)
