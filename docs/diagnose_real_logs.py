@@ -185,7 +185,8 @@ def compare(rev: str) -> Path:
                 f"{rev} --no-run`. Halves z: the largest difference between the two halves' "
                 "coefficients in standard errors (before: formal, independent samples; after: "
                 "block jackknife, with the formal in brackets). p: Hotelling's T^2 with the "
-                "jackknife covariance (the `honest` test, p < 0.01). `-`: not computed (the "
+                "jackknife covariance (the `honest` test: p < 0.01 over the round's candidates, "
+                "`honest_alpha` in the JSON; 0.01 for each before 8ab2e27). `-`: not computed (the "
                 "honest tests run only for candidates that pass BIC, null and plausibility).",
                 "",
                 "| log | verdict | round | candidate | before | halves z | after | halves z | p |",
