@@ -440,7 +440,9 @@ def test_marg_timing_found_through_noise_between_samples():
     acc, mag = _marg_log(shift=5, n=3000, noise=(6e-3, 0.6))
     d = diagnose_marg(acc, mag, sample_rate=100.0, progress=False)
     assert "timing_offset" in d.effects, d.rounds
-    assert d.steps[-1]["coefficients"]["dt_s"] == pytest.approx(-0.05, abs=5e-3)
+    coef = d.steps[-1]["coefficients"]
+    assert coef["dt_resolution_s"] == pytest.approx(5e-3)  # half a sample at 100 Hz
+    assert coef["dt_s"] == pytest.approx(-0.05, abs=coef["dt_resolution_s"])
 
 
 @pytest.mark.parametrize("rot_deg", [0.0, 4.0])
