@@ -115,18 +115,18 @@ def _fit_one(p0, a, t, tm, m, P, w, free):
     return res.params, res.stderr, res.status, e, J
 
 
-def _fit_one_reordered(p0, m, P, w, free, a, t, tm):
+def _fit_one_reordered(p0, P, w, free, a, t, tm, m):
     return _fit_one(p0, a, t, tm, m, P, w, free)
 
 
 _compiled = disk_jit(_fit_one_reordered, "diagnose.marg.fit_one")
 
 
-def _run(rows, t, tm):
-    """rows: (p0, m_series, P, w, free, a) per problem (``a``: the accelerometer's directions
-    at the observations), fitted in turn by one compiled fit."""
-    p0, ms, Ps, w, fr, As = (np.stack([r[i] for r in rows]) for i in range(6))
-    out = fit_each(_compiled, p0, ms, Ps, w, fr, As, shared=(t, tm))
+def _run(rows, t, tm, m):
+    """rows: (p0, P, w, free, a) per problem (``a``: the accelerometer's directions at the
+    observations), fitted in turn by one compiled fit on the magnetometer series ``m``."""
+    p0, Ps, w, fr, As = (np.stack([r[i] for r in rows]) for i in range(5))
+    out = fit_each(_compiled, p0, Ps, w, fr, As, shared=(t, tm, m))
     return [_summary(*(o[k] for o in out), w[k], fr[k]) for k in range(len(rows))]
 
 
@@ -328,7 +328,7 @@ def diagnose_marg(
     theta0 = float(np.mean(_angles(a, Mn[keep])))
     base_free = np.array([False, False, False, True, False])
     w = np.ones(m)
-    [base] = _run([(np.array([0, 0, 0, theta0, 0.0]), Mf, eye, w, base_free, a)], tob, tm)
+    [base] = _run([(np.array([0, 0, 0, theta0, 0.0]), eye, w, base_free, a)], tob, tm, Mf)
     # permutation search for the misalignment candidate
     search = permutation_search(a, Mn[keep])
     P_best = search.permutation
@@ -346,7 +346,7 @@ def diagnose_marg(
         # a discrete finding, taken before the rounds: the candidates then fit what is left
         P_cur = P_best
         th0 = np.array([0, 0, 0, float(np.mean(_angles(a, Mn[keep] @ P_best.T))), 0.0])
-        [cur] = _run([(th0, Mf, P_best, w, base_free, a)], tob, tm)
+        [cur] = _run([(th0, P_best, w, base_free, a)], tob, tm, Mf)
         effects.append("axis_permutation")
         steps.append(_step("base+axis_permutation", cur, 0, effect="axis_permutation"))
         steps[-1]["coefficients"] = {"permutation": perm["permutation"]}
@@ -367,18 +367,14 @@ def diagnose_marg(
             fc[SLOTS[c]] = True
             P = P_best if c == "sensor_misalignment" else P_cur
             idx[c] = len(rows)
-            rows += [
-                (th, Mf, P, w, fc, a),
-                (th, Mf, P, w * first, fc, a),
-                (th, Mf, P, w * ~first, fc, a),
-            ]
-            rows += [(th, Mf, P, w * (block != b), fc, a) for b in range(JACKKNIFE_BLOCKS)]
-            rows += [(th, Mf, P, w, fc, an) for an in nulls]
+            rows += [(th, P, w, fc, a), (th, P, w * first, fc, a), (th, P, w * ~first, fc, a)]
+            rows += [(th, P, w * (block != b), fc, a) for b in range(JACKKNIFE_BLOCKS)]
+            rows += [(th, P, w, fc, an) for an in nulls]
         nb0 = len(rows)
-        rows += [(th, Mf, P_cur, w, free, an) for an in nulls]
+        rows += [(th, P_cur, w, free, an) for an in nulls]
         jb0 = len(rows)  # the current model without each block: its held-out errors
-        rows += [(th, Mf, P_cur, w * (block != b), free, a) for b in range(JACKKNIFE_BLOCKS)]
-        fits = _run(rows, tob, tm)
+        rows += [(th, P_cur, w * (block != b), free, a) for b in range(JACKKNIFE_BLOCKS)]
+        fits = _run(rows, tob, tm, Mf)
         nb = [f["bic"] for f in fits[nb0:jb0]]
         held_cur = held_out_rms([f["e"] for f in fits[jb0:]], block, w)
         n = len(remaining)
