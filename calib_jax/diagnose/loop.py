@@ -872,8 +872,8 @@ def _too_large_to_accept(rounds, rms, sensor, scale_to_output, units) -> tuple[l
     pass BIC and the null test) but fail plausibility, and the lowest rms they reach (inf if
     none): without them the user read "no catalogue effect explains it", and that the poses
     looked like pauses in a motion, beside a drift that took the rms from 30 to 5 mg and was
-    refused only for being larger than a sensor's bias moves (issue 15's power study: every
-    accelerometer effect at 10-20x the floor of a correlated log)."""
+    refused only for being larger than a sensor's bias moves (issue 15's power study: the
+    accelerometer rows at 10-20x the floor that detect 0 %)."""
     out, best = [], float("inf")
     for e in rounds[-1] if rounds else []:
         t = e.get("tests", {})
