@@ -451,6 +451,22 @@ def test_marg_timing_found_through_noise_between_samples(shift, noise):
     assert d.steps[-1]["coefficients"]["dt_s"] == pytest.approx(-shift / 100, abs=2e-3)
 
 
+def test_marg_floors_are_those_of_the_rest_when_rows_are_missing():
+    """Rows without a finite reading are left out before the floors are measured; the rest
+    was found on the whole log but sliced from the finite rows, so 400 empty rows at the start
+    moved the floor's window 400 samples (white floor 2.71e-3 instead of 2.89e-3 rad)."""
+    from calib_jax.diagnose import diagnose_marg
+
+    acc, mag = _marg_log(n=3000)
+    pad = np.full((400, 3), np.nan)
+    d0 = diagnose_marg(acc, mag, sample_rate=100.0, progress=False)
+    d1 = diagnose_marg(
+        np.vstack([pad, acc]), np.vstack([pad, mag]), sample_rate=100.0, progress=False
+    )
+    assert d1.noise_floor_white == pytest.approx(d0.noise_floor_white, rel=1e-9)
+    assert d1.noise_floor_allan == pytest.approx(d0.noise_floor_allan, rel=1e-9)
+
+
 @pytest.mark.parametrize("rot_deg", [0.0, 4.0])
 def test_marg_correlated_errors_honest_standard_errors(rot_deg):
     """Issue 15: with the hand's acceleration in the log (0.02 g, correlated over ~1 s) the

@@ -240,10 +240,13 @@ def _permutation_entry(search) -> dict:
     }
 
 
-def _angle_floors(A, Afn, Mn, sample_rate, ok) -> tuple[float, float, str]:
+def _angle_floors(Af, Afn, Mn, sample_rate) -> tuple[float, float, str]:
     """(white, Allan, note): the gravity-field angle's noise floors over the longest rest,
-    or, without a rest, a white floor from first differences and no Allan floor."""
-    rep = detect_rest(A, sample_rate=sample_rate, valid=ok)
+    or, without a rest, a white floor from first differences and no Allan floor. All three
+    series hold the finite rows only, so the rest's indices are theirs (found on the whole
+    log with its gaps, they pointed 400 samples off in a log that starts with 400 empty
+    rows)."""
+    rep = detect_rest(Af, sample_rate=sample_rate)
     if rep.intervals:
         iv = max(rep.intervals, key=lambda v: v.n)
         rest = _angles(Afn[iv.start : iv.stop], Mn[iv.start : iv.stop])
@@ -400,7 +403,7 @@ def diagnose_marg(
     # floors: the angle over the longest rest, with the final model's rotation
     R_fin = Rotation.from_rotvec(np.array(cur["theta"][:3] * free[:3])).as_matrix() @ P_cur
     Mn = Mn @ R_fin.T
-    white, allan, note = _angle_floors(A, Afn, Mn, sample_rate, ok)
+    white, allan, note = _angle_floors(Af, Afn, Mn, sample_rate)
     notes.append(note)
     floor = float(np.nanmax([white, allan]))
 
