@@ -1033,7 +1033,8 @@ def _add_diagnose_parser(sub) -> None:
         choices=("auto", "full", "sphere"),
         default="auto",
         help="mag: the declared model; auto (default): the one calib-jax mag chooses for the "
-        "log (sphere makes soft_iron a candidate)",
+        "log (sphere makes soft_iron a candidate). marg: the ellipsoid fitted to each sensor "
+        "first (auto: full; sphere for a log that turns too little for an ellipsoid)",
     )
     p.add_argument("--degree", type=int, choices=(1, 2), default=1, help="effect polynomial degree")
     p.add_argument("--seed", type=int, default=0, help="seed of the null-test simulations")

@@ -512,6 +512,22 @@ def test_marg_ckexplorer_through_the_cli(tmp_path):
     assert (tmp_path / "rep" / "angle_time.png").exists()
 
 
+def test_marg_on_spheres_where_the_verdict_advises_them(tmp_path, capsys):
+    """The x-io hand-held log turns too little for a full accelerometer ellipsoid: the MARG
+    diagnosis is not possible and its reason says to fit a sphere (--model sphere). That flag
+    used to reach only the magnetometer diagnosis, so following the advice changed nothing;
+    with it the two sensors are calibrated on spheres and the angle is judged."""
+    from .conftest import shared_file
+
+    log = str(shared_file("xio_fusion_sensor_data/sensor_data.csv"))
+    assert main(["diagnose", log, "--sensor", "marg", "--no-progress"]) != 0
+    assert "--model sphere" in capsys.readouterr().err
+    out = tmp_path / "d.json"
+    cmd = ["diagnose", log, "--sensor", "marg", "--model", "sphere", "--no-progress"]
+    assert main([*cmd, "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["verdict"] != "not_possible"
+
+
 def test_a_base_fit_that_does_not_converge_gives_no_verdict(monkeypatch):
     """RocketPy's CATS Vega flight log (a descent read as poses): the base fit ran out of
     iterations and `calib-jax diagnose` still gave 'unexplained_structure' with exit 0,

@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             source=log.path,
             progress=progress,
+            model="full" if args.model == "auto" else args.model,
         )
     else:
         d = diagnose_mag(log, model=args.model, **common)

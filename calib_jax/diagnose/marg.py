@@ -270,11 +270,15 @@ def diagnose_marg(
     seed: int = 0,
     source: str | None = None,
     progress: bool | None = None,
+    model: str = "full",
 ) -> Diagnosis:
     """The loop on simultaneous accelerometer and magnetometer samples (module docstring).
 
     ``acc`` and ``mag`` are raw (N, 3); each is calibrated first with
-    :func:`calib_jax.calibrate_mag` (``sensor="accel"`` for the accelerometer). Observations
+    :func:`calib_jax.calibrate_mag` (``sensor="accel"`` for the accelerometer), with the
+    ellipsoid ``model`` ("full", "diag", "sphere" or "auto"): a log that turns too little
+    for a full ellipsoid, whose fit the verdict then calls failed, can be judged on spheres.
+    Observations
     are quasi-static samples (|a| within ``static_tol`` of g), every k-th to at most
     ``max_points``. rms values are in radians (the summary prints degrees). ``progress``: a
     bar over the rounds, as in :func:`calib_jax.diagnose.diagnose_accel`.
@@ -290,8 +294,8 @@ def diagnose_marg(
     ok = np.all(np.isfinite(acc), axis=1) & np.all(np.isfinite(mag), axis=1)
     with warnings.catch_warnings():  # a failed fit's reasons are in the verdict below
         warnings.simplefilter("ignore", FitStatusWarning)
-        ca = calibrate_mag(acc[ok], sensor="accel", field=1.0, model="full")
-        cm = calibrate_mag(mag[ok], model="full")
+        ca = calibrate_mag(acc[ok], sensor="accel", field=1.0, model=model)
+        cm = calibrate_mag(mag[ok], model=model)
     for name, c in (("accelerometer", ca), ("magnetometer", cm)):
         if c.status in ("failed", "not_converged"):
             return _not_possible(
