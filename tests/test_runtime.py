@@ -130,3 +130,53 @@ def test_disk_jit_under_a_transformation_is_plain_jit(tmp_path, monkeypatch):
     assert not (tmp_path / "aot").exists()
     assert float(f(xs[1])["s"]) == 50.0  # concrete: exported and kept
     assert len(list((tmp_path / "aot").iterdir())) == 1
+
+
+FLAG_PROGRAM = """
+    import os
+    import jax, jax.numpy as jnp
+    from calib_jax.runtime import configure
+    {before}
+    configure(cache=False)
+    print(os.environ.get("XLA_FLAGS", ""))
+    print(float(jax.jit(lambda x: jnp.sum(jnp.sin(x) ** 2))(jnp.arange(5.0))))
+"""
+
+
+@pytest.mark.parametrize(
+    ("user_flags", "before", "expected_flags"),
+    [
+        (None, "", "--xla_cpu_use_fusion_emitters=false"),
+        ("--xla_cpu_use_fusion_emitters=true", "", "--xla_cpu_use_fusion_emitters=true"),
+        (
+            "--xla_cpu_enable_fast_math=false",
+            "",
+            "--xla_cpu_enable_fast_math=false --xla_cpu_use_fusion_emitters=false",
+        ),
+        (None, "jax.devices()", ""),  # XLA already started: its flags were read, none added
+    ],
+)
+def test_configure_asks_for_short_compiles_unless_the_user_chose(
+    user_flags, before, expected_flags
+):
+    """configure() adds runtime.SHORT_COMPILES_FLAG to XLA_FLAGS (XLA aborts on a flag it does
+    not know, so a process that computes shows the flag was taken), keeps a user's own choice
+    of that option, keeps their other flags, and adds nothing once XLA has started."""
+    from calib_jax import runtime
+
+    if not runtime._flag_measured():
+        pytest.skip("jaxlib not among runtime.SHORT_COMPILES_JAXLIB: the flag is never given")
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    if user_flags is not None:
+        env["XLA_FLAGS"] = user_flags
+    r = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(FLAG_PROGRAM.format(before=before))],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    flags, value = r.stdout.splitlines()[-2:]
+    assert flags == expected_flags
+    assert value == EXPECTED
