@@ -57,7 +57,6 @@ from .models.mag import (
     raw_covariance,
     unpack,
 )
-from .runtime import default_emitters
 from .status import Status, fit_status, is_converged, status_message
 
 MIN_SAMPLES = 20
@@ -421,9 +420,7 @@ def _compiled(
         mesh = Mesh(np.array(jax.devices()), ("sensors",))
         P = PartitionSpec("sensors")
         run = jax.shard_map(run, mesh=mesh, in_specs=(P, P, P), out_specs=P, check_vma=False)
-    # XLA's default CPU emitters for this one program, whatever runtime.configure chose for the
-    # fits: its vmapped moment pass over every sample is run time, not compile time
-    return jax.jit(run, compiler_options=default_emitters())
+    return jax.jit(run)
 
 
 def sensor_bucket(n: int, devices: int = 1) -> int:

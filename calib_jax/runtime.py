@@ -74,9 +74,11 @@ def configure(*, x64: bool = True, cache: bool = True) -> str:
 # fits' programs (an LM loop around small hand-written solves: thousands of tiny fusions, little
 # data) in 30-40 % less time: fit_mag 2.9 -> 1.7 s, the gradient of fit_accel 2.6 -> 1.9 s;
 # cold ``calib-jax mag`` 9.1 -> 6.6 s and ``marg`` 15.9 -> 11.8 s; the test suite 13.1 -> 10.6
-# min, every test passing with either (2-core CPU, jaxlib 0.10.2). The batch fit's big vmapped
-# program keeps the default (calib_jax.batch). XLA aborts the process on a flag it does not know,
-# so the flag is only given to the jaxlib versions it was measured on.
+# min, every test passing with either (2-core CPU, jaxlib 0.10.2). The batch fit (benchmarks/
+# batch.py, three runs each way at load 1-2) compiles in 3.3-3.5 s instead of 4.0-4.4 s and runs
+# as fast: 0.111-0.115 against 0.109-0.110 ms per sensor at 1,000 sensors, 0.153-0.154 against
+# 0.155-0.184 at 100. XLA aborts the process on a flag it does not know, so the flag is only
+# given to the jaxlib versions it was measured on.
 SHORT_COMPILES_FLAG = "--xla_cpu_use_fusion_emitters=false"
 SHORT_COMPILES_JAXLIB = ((0, 10),)  # jaxlib (major, minor) on which the flag was measured
 
@@ -102,12 +104,6 @@ def _flag_measured() -> bool:
 
     major, minor = (int(x) for x in jaxlib.version.__version__.split(".")[:2])
     return (major, minor) in SHORT_COMPILES_JAXLIB
-
-
-def default_emitters() -> dict:
-    """``compiler_options`` for a ``jax.jit`` that keeps XLA's default CPU emitters whatever
-    :func:`configure` chose (empty where the option is not known to work)."""
-    return {"xla_cpu_use_fusion_emitters": True} if _flag_measured() else {}
 
 
 # ---------------------------------------------------------------------------------------------
