@@ -18,6 +18,7 @@ def describe() -> dict:
         "host_cores": os.cpu_count(),
         "load_1min": os.getloadavg()[0],
         "jax": jax.__version__,
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
     }
 
 

@@ -33,7 +33,11 @@ from pathlib import Path
 
 import jax
 
-jax.config.update("jax_enable_x64", True)
+from calib_jax.runtime import configure
+
+# as a user's session (docs/index.md) and the CLI: float64 and XLA's short-compile CPU emitter
+# (runtime.SHORT_COMPILES_FLAG); no compilation cache, so "first call" is a compile
+configure(cache=False)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
