@@ -83,20 +83,17 @@ SHORT_COMPILES_FLAG = "--xla_cpu_use_fusion_emitters=false"
 SHORT_COMPILES_JAXLIB = ((0, 10),)  # jaxlib (major, minor) on which the flag was measured
 
 
-def _prefer_short_compiles() -> bool:
+def _prefer_short_compiles() -> None:
     """Add :data:`SHORT_COMPILES_FLAG` to ``XLA_FLAGS`` before XLA starts, unless the user's
     ``XLA_FLAGS`` already chooses the CPU fusion emitters, XLA has started (flags are read once)
-    or this jaxlib was not measured. Returns whether the flag is now in effect."""
+    or this jaxlib was not measured."""
     from jax._src import xla_bridge
 
     flags = os.environ.get("XLA_FLAGS", "")
-    name = SHORT_COMPILES_FLAG.split("=")[0]
-    if name in flags:
-        return SHORT_COMPILES_FLAG in flags.split()
-    if not _flag_measured() or xla_bridge.backends_are_initialized():
-        return False
-    os.environ["XLA_FLAGS"] = f"{flags} {SHORT_COMPILES_FLAG}".strip()
-    return True
+    if SHORT_COMPILES_FLAG.split("=")[0] in flags or not _flag_measured():
+        return
+    if not xla_bridge.backends_are_initialized():
+        os.environ["XLA_FLAGS"] = f"{flags} {SHORT_COMPILES_FLAG}".strip()
 
 
 def _flag_measured() -> bool:
