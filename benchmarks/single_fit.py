@@ -20,7 +20,10 @@ from pathlib import Path
 
 import jax
 
-jax.config.update("jax_enable_x64", True)
+from calib_jax.runtime import configure
+
+# as a user's session and the CLI: float64 and XLA's short-compile CPU emitter; no cache
+configure(cache=False)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from _device import describe, label, suffix  # noqa: E402
