@@ -87,11 +87,11 @@ def _prefer_short_compiles() -> None:
     """Add :data:`SHORT_COMPILES_FLAG` to ``XLA_FLAGS`` before XLA starts, unless the user's
     ``XLA_FLAGS`` already chooses the CPU fusion emitters, XLA has started (flags are read once)
     or this jaxlib was not measured."""
-    from jax._src import xla_bridge
-
     flags = os.environ.get("XLA_FLAGS", "")
     if SHORT_COMPILES_FLAG.split("=")[0] in flags or not _flag_measured():
         return
+    from jax._src import xla_bridge  # private: only reached on the jaxlib measured
+
     if not xla_bridge.backends_are_initialized():
         os.environ["XLA_FLAGS"] = f"{flags} {SHORT_COMPILES_FLAG}".strip()
 
