@@ -1153,6 +1153,36 @@ def _last_three_held(data: np.ndarray | None) -> bool:
     return bool(np.all(np.ptp(last[ok], axis=0) == 0) and np.all(np.ptp(before[ok], axis=0) > 0))
 
 
+def _steady_magnitude(v: np.ndarray) -> float | None:
+    """Median over 95th percentile of a triple's magnitude: near 1 for an accelerometer (about
+    g whether still or turned), near 0 for a gyroscope (still most of the time, fast in the
+    turns); None without 10 finite rows or any motion."""
+    n = np.linalg.norm(v[np.all(np.isfinite(v), axis=1)], axis=1)
+    top = np.percentile(n, 95) if len(n) >= 10 else 0.0
+    return float(np.median(n) / top) if top > 0 else None
+
+
+def _gyro_before_accel(cols: list[str], why: str, data: np.ndarray | None) -> tuple[list, str]:
+    """A headerless layout guessed as accelerometer then gyroscope, checked against the data:
+    x-io's sensor_data.csv (and many loggers) write the gyroscope first. Its magnitude rests near
+    zero and the next three columns hold a steady one, so read as ax.. it gave a gyro
+    'accelerometer' that failed on 'only 6 distinct poses' (x-io's log without its header).
+    The names are swapped only when both triples say so clearly."""
+    if data is None or "ax" not in cols or "gx" not in cols:
+        return cols, why
+    a, g = cols.index("ax"), cols.index("gx")
+    first, second = _steady_magnitude(data[:, a : a + 3]), _steady_magnitude(data[:, g : g + 3])
+    if first is None or second is None or not (first < 0.3 and second > 0.7):
+        return cols, why
+    swapped = list(cols)
+    swapped[a : a + 3], swapped[g : g + 3] = cols[g : g + 3], cols[a : a + 3]
+    return swapped, (
+        f"gyroscope first: columns {a + 1}-{a + 3} rest near zero and jump (median magnitude "
+        f"{first:.2f} of its 95th percentile), columns {g + 1}-{g + 3} hold a steady one "
+        f"({second:.2f})"
+    )
+
+
 def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
     """Headerless columns by width: the names and the reason given in the note."""
     p = _SENSORS[sensor]
@@ -1476,6 +1506,7 @@ def _assemble(
                 "('_' skips a column; t for a time column, else give --sample-rate)"
             )
         cols, why = _time_last(guess[0], by_name or guess[1], data, path)
+        cols, why = _gyro_before_accel(cols, why, data)
         source = {c: i for i, c in enumerate(cols) if c != "_"}
         notes.append(
             f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
