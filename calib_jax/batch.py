@@ -282,14 +282,13 @@ def _batch_moments(raw, valid, chunk: int | None = None):
     (default by platform, :data:`MOMENT_CHUNK`).
 
     CPU: lax.map in chunks of 8 sensors, not one vmap over all: a chunk's samples (0.9 MB for
-    4,800 each) stay in cache for the mean and the power sums; a vmap over the whole batch
-    materialises every sensor's monomials at once and ran 3-4x slower here (0.48 against 0.15
-    ms per sensor, with the earlier 6 x 10 product), one sensor at a time about 10 % slower
-    than chunks; chunks of 4, 16 and 32 measured 0.101, 0.117 and 0.123 ms against 0.105
-    for 8 (benchmarks/moment_pass.py times the pass). A GPU runs each step as a few kernel
-    launches, so it takes far larger chunks: on an H200 at 10,000 sensors, 8, 64, 512 and
-    4096 per step took 6.3, 0.86, 0.52 and 0.50 us per sensor
-    (benchmarks/results/moment_pass_gpu.json, ``moment_pass.py --chunks``).
+    4,800 each) stay in cache between the mean and the power sums (each one variadic reduce,
+    :func:`calib_jax.geometry.sum_last`); chunks of 4, 8, 16 and 64 measured 0.017, 0.018,
+    0.044 and 0.052 ms per sensor (benchmarks/moment_pass.py times the pass). A GPU runs each
+    step as a few kernel launches, so it takes far larger chunks: on an H200 at 10,000
+    sensors, 8, 64, 512 and 4096 per step took 6.3, 0.86, 0.52 and 0.50 us per sensor (with
+    the earlier 35 separate sums; benchmarks/results/moment_pass_gpu.json,
+    ``moment_pass.py --chunks``).
     """
     if chunk is None:
         chunk = MOMENT_CHUNK.get(jax.default_backend(), MOMENT_CHUNK["gpu"])

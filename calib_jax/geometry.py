@@ -25,17 +25,45 @@ _PHI_FACTOR = np.array([1, 1, 1, 2, 2, 2, 1, 1, 1, 1.0])  # phi = factor * monom
 _POWER_DEGREE = np.array([sum(e) for e in _POWERS])
 
 
-def power_sums(x: jax.Array, w: jax.Array) -> jax.Array:
-    """The 35 weighted power sums sum_i w_i x_i^a y_i^b z_i^c, a + b + c <= 4 (order of
-    ``_POWERS``), of samples x (N, 3): one product and one sum per monomial and sample, all
-    in one pass over the samples."""
+def _monomials(x: jax.Array, w: jax.Array) -> tuple[jax.Array, ...]:
+    """w x^a y^b z^c per sample for the 35 exponents of ``_POWERS``, each built from an earlier
+    one times x, y or z (one product per monomial and sample)."""
     X, Y, Z = x[..., 0], x[..., 1], x[..., 2]
     mono = {(0, 0, 0): w}
     for e in _POWERS[1:]:
         a, b, c = e
         lower, factor = ((a - 1, b, c), X) if a else ((a, b - 1, c), Y) if b else ((a, b, c - 1), Z)
         mono[e] = mono[lower] * factor
-    return jnp.stack([jnp.sum(mono[e], axis=-1) for e in _POWERS], axis=-1)
+    return tuple(mono[e] for e in _POWERS)
+
+
+@jax.custom_jvp
+def sum_last(terms: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
+    """Each array of ``terms`` summed over its last axis, all in one variadic ``lax.reduce``:
+    XLA emits a single loop over the samples with one accumulator per term, where separate
+    ``jnp.sum`` calls write each term out and read it back. The 35 power sums of 1,000 sensors
+    x 4,800 samples: 0.009 ms per sensor this way against 0.059 ms as 35 sums (2-core CPU,
+    benchmarks/moment_pass.py). JAX has no derivative for a reduce with a user-written body;
+    the sums are linear, so the tangents are summed by ``jnp.sum`` (:func:`_sum_last_jvp`)."""
+    zeros = tuple(jnp.zeros((), t.dtype) for t in terms)
+    return jax.lax.reduce(
+        tuple(terms),
+        zeros,
+        lambda a, b: tuple(p + q for p, q in zip(a, b, strict=True)),
+        (terms[0].ndim - 1,),
+    )
+
+
+@sum_last.defjvp
+def _sum_last_jvp(primals, tangents):
+    (terms,), (dterms,) = primals, tangents
+    return sum_last(terms), tuple(jnp.sum(t, axis=-1) for t in dterms)
+
+
+def power_sums(x: jax.Array, w: jax.Array) -> jax.Array:
+    """The 35 weighted power sums sum_i w_i x_i^a y_i^b z_i^c, a + b + c <= 4 (order of
+    ``_POWERS``), of samples x (N, 3), in one pass over the samples (:func:`sum_last`)."""
+    return jnp.stack(sum_last(_monomials(x, w)), axis=-1)
 
 
 def moments_from_power_sums(P: jax.Array, scale: jax.Array | float = 1.0) -> jax.Array:
@@ -65,9 +93,9 @@ def normalised_moments(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array
     anything (NaN too)."""
     use = w > 0
     x = jnp.where(use[:, None], x, 0.0)
-    n = jnp.sum(w)
+    n, *sums = sum_last((w, w * x[:, 0], w * x[:, 1], w * x[:, 2]))  # one pass, as below
     n = jnp.where(n > 0, n, 1.0)
-    mean = (w @ x) / n
+    mean = jnp.stack(sums) / n
     P = power_sums(jnp.where(use[:, None], x - mean, 0.0), w)
     square = P[_POWER_INDEX[(2, 0, 0)]] + P[_POWER_INDEX[(0, 2, 0)]] + P[_POWER_INDEX[(0, 0, 2)]]
     k = jnp.sqrt(square / n)
