@@ -329,6 +329,9 @@ def check_poses(
     n_fitted, n_nominal = (
         max(1, distinct_directions(pts, c)) for c in (c_s, nominal_centre)
     )  # one point about its own centre has no direction: still one pose
+    if len(pts) < 4:  # no sphere passes through fewer than 4 points: its centre is arbitrary
+        # (a Pololu log's two opposite poses counted as 1 distinct pose about it)
+        n_fitted = n_nominal
     n_distinct = min(n_fitted, n_nominal)
     about = ""
     if n_fitted != n_nominal:  # say which count this is: the detector's counts are the other
@@ -343,7 +346,8 @@ def check_poses(
         _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])
     if n_distinct < n_free:
         raise TooFewPoses(
-            f"only {n_distinct} distinct poses (gravity directions at least 10 degrees apart"
+            f"only {n_distinct} distinct pose{'s' if n_distinct != 1 else ''} (gravity "
+            f"directions at least 10 degrees apart"
             f"{about}) among the {len(pts)} fit points: static detection "
             f"{detection_found(obs.report, sample_rate)}; the {n_free}-parameter model needs at "
             f"least {n_free} poses spread over the sphere (paper 1 uses 48)",

@@ -270,7 +270,7 @@ def test_a_board_that_never_moved_is_one_pose(tmp_path):
     nominal centre (zero for g) it is the one pose it is, and the error says so."""
     rng = np.random.default_rng(0)
     x = np.round(np.array([0.02, -0.01, 1.0]) + 0.01 * rng.normal(size=(1600, 3)), 2)
-    with pytest.raises(ValueError, match="only 1 distinct poses"):
+    with pytest.raises(ValueError, match="only 1 distinct pose"):
         cj.calibrate_accel(x)
 
 

@@ -480,10 +480,10 @@ def test_a_coarse_still_log_is_one_pose_not_a_table_and_not_saturated():
     valid, notes = screen_samples(x, "accel")
     assert valid.all() and notes == []
     assert detect_static(x).kind == "log"
-    with pytest.raises(ValueError, match="only 1 distinct poses"):
+    with pytest.raises(ValueError, match="only 1 distinct pose"):
         calibrate_accel(x)
     d = diagnose_accel(x)
-    assert d.verdict == "not_possible" and "only 1 distinct poses" in d.notes[0]
+    assert d.verdict == "not_possible" and "only 1 distinct pose" in d.notes[0]
 
 
 def test_a_stuck_axis_is_named():

@@ -253,7 +253,7 @@ def test_board_that_never_moved_is_not_a_pose_table():
     rng = np.random.default_rng(3)
     flat = np.round(np.array([12.0, -30.0, 1000.0]) + rng.normal(0, 0.7, (300, 3)))
     assert not looks_like_pose_table(flat)
-    with pytest.raises(ValueError, match="only 1 distinct poses") as e:
+    with pytest.raises(ValueError, match="only 1 distinct pose") as e:
         cj.calibrate_accel(flat)
     msg = str(e.value)
     assert "pose table" not in msg

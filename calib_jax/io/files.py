@@ -1141,6 +1141,33 @@ def _time_last(cols: list[str], why: str, data: np.ndarray | None, path) -> tupl
     )
 
 
+def _clocks_at_an_end(
+    width: int, data: np.ndarray | None, sensor: str | None
+) -> tuple[list[str], str] | None:
+    """Headerless columns that are a known layout (3, 6 or 9 sensor columns) beside one or two
+    columns that only rise, all at one end: logger clocks. Pololu's MinIMU-9 logs
+    (scikit-kinematics) end with the acc/gyro and the magnetometer clocks in ms, and were
+    refused for 11 columns, with a --columns example for mag that named the accelerometer's
+    columns. The first clock is read as time, a second one is left out."""
+    if data is None or len(data) < 2:
+        return None
+    rising = [j for j in range(width) if _rising(data[:, j])]
+    k = len(rising)
+    if k not in (1, 2) or rising not in (list(range(k)), list(range(width - k, width))):
+        return None
+    known = _guess(width - k, sensor)
+    if known is None or "t" in known[0] or width - k < 6:
+        return None
+    clocks = ["t", *["_"] * (k - 1)]
+    first = rising[0] == 0
+    cols = [*clocks, *known[0]] if first else [*known[0], *clocks]
+    where = ", ".join(str(j + 1) for j in rising)
+    return cols, (
+        f"{known[1]}; column{'s' if k > 1 else ''} {where} only rise: "
+        + ("the first read as time, the other left out" if k > 1 else "read as time")
+    )
+
+
 def _last_three_held(data: np.ndarray | None) -> bool:
     """The last three columns hold one value each for the whole file while the three before
     them move: a sensor's readings followed by a constant estimate of its bias."""
@@ -1496,6 +1523,8 @@ def _assemble(
                 [*(["t"] if width == 7 else []), p + "x", p + "y", p + "z", "_", "_", "_"],
                 (named or f"sensor {_SENSOR_LABELS[p]}") + f", then {held}, left out",
             )
+        if guess is None:
+            guess = _clocks_at_an_end(width, data, sensor)
         if guess is None:
             if width < 3:
                 raise ValueError(
