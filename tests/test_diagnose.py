@@ -587,7 +587,7 @@ def test_the_declared_magnetometer_model_is_calib_jax_mags_choice():
         diagnose_mag(raw, model="diag")
 
 
-def test_a_partial_tumble_whose_full_base_fails_is_diagnosed_from_the_sphere():
+def test_a_partial_tumble_whose_full_base_fails_is_diagnosed_from_the_sphere(capsys):
     """scikit-kinematics' YEI 3-Space log (tests/data/skinematics, BSD-3): a hand-held
     magnetometer record covering about a third of the sphere. calib-jax mag chooses the
     diagonal ellipsoid; the diagnosis's base containing it (the full ellipsoid) did not
@@ -606,3 +606,8 @@ def test_a_partial_tumble_whose_full_base_fails_is_diagnosed_from_the_sphere():
     ), d.notes
     assert d.verdict != "not_possible" and np.isfinite(d.steps[0]["rms"])
     assert any(e["effect"] == "soft_iron" for r in d.rounds for e in r), d.rounds
+    # without --sensor the accelerometer is diagnosed (2 poses: not possible), and the refusal
+    # now points at the magnetometer the log also holds
+    assert main(["diagnose", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "only 2 distinct poses" in err and "also holds magnetometer columns: --sensor mag" in err

@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
     log = load_args(args, sensor="mag" if args.sensor == "marg" else args.sensor)
     guessed = ""
+    defaulted = args.sensor is None
     if args.sensor is None:  # the accelerometer, unless the log has only a magnetometer
         args.sensor = "mag" if log.acc is None and log.mag is not None else "accel"
         if args.sensor == "accel" and any(  # a guess: neither a header nor the name said
@@ -90,5 +91,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {args.file}: {why}", file=sys.stderr)
         if guessed:
             print(guessed, file=sys.stderr)
+        elif defaulted and args.sensor == "accel" and log.mag is not None:
+            # the YEI log of scikit-kinematics: 2 poses, but a magnetometer the user was not told
+            # could be diagnosed instead
+            print(
+                f"note: {args.file} also holds magnetometer columns: --sensor mag diagnoses "
+                "them (--sensor marg, both sensors together)",
+                file=sys.stderr,
+            )
         return 2
     return 0
