@@ -988,7 +988,7 @@ class MagCalibration(SensorCalibration):
         if len(self.model_selection) > 1:
             out.append(
                 "model choice (BIC, lower is better, among the models the data determine, else "
-                "among those that converged to a bounded ellipsoid): "
+                "the sphere): "
                 + ", ".join(
                     f"{m} {v['bic']:.1f} ({v['rms_pct']:.3f} %{_selection_flag(v)})"
                     for m, v in self.model_selection.items()

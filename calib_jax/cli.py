@@ -722,7 +722,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         choices=["sphere", "diag", "full", "auto"],
         help="hard iron only, axis-aligned ellipsoid, full ellipsoid, or (auto) the lowest "
-        "BIC among the models the data determine",
+        "BIC among the models the data determine (the sphere when none is)",
     )
     m.add_argument(
         "--field", type=_pos_float, default=None, help="known field magnitude (output scale)"

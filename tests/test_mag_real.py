@@ -256,3 +256,24 @@ def test_soft_iron_standard_errors_do_not_follow_the_unit(ck):
     np.testing.assert_allclose(b.stderr_soft_iron, a.stderr_soft_iron, rtol=1e-6)
     np.testing.assert_allclose(b.stderr_center, 1000.0 * a.stderr_center, rtol=1e-6)
     assert np.all(a.stderr_soft_iron < 0.05)  # dimensionless W ~ 1, well determined
+
+
+def test_no_determined_model_keeps_the_sphere():
+    """scikit-kinematics' YEI 3-Space log (tests/data/skinematics, BSD-3): a hand-held record
+    covering about a third of the sphere, where no model's parameters are pinned down. The
+    lowest BIC was then taken anyway: a diagonal soft iron with semi-axes 0.463, 0.392 and
+    0.156 gauss for a 0.53-gauss field (one axis 3x shorter, no magnetometer's soft iron),
+    saved with exit 0. Now the sphere is kept and the warning names the model the BIC
+    preferred; a declared model is still fitted as asked."""
+    from pathlib import Path
+
+    path = Path(__file__).parent / "data" / "skinematics" / "data_yei.txt"
+    cal = cj.calibrate_mag(path)
+    sel = cal.model_selection
+    assert not any(v["well_determined"] for v in sel.values()), sel
+    assert sel["diag"]["bic"] < sel["sphere"]["bic"]  # what the BIC alone would choose
+    assert cal.model == "sphere" and cal.status == "poorly_determined"
+    assert any(
+        "the sphere (hard iron only) is kept; diag had the lowest BIC" in w for w in cal.warnings
+    )
+    assert cj.calibrate_mag(path, model="diag").model == "diag"
