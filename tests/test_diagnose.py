@@ -587,18 +587,28 @@ def test_the_declared_magnetometer_model_is_calib_jax_mags_choice():
         diagnose_mag(raw, model="diag")
 
 
-def test_a_partial_tumble_whose_full_base_fails_is_diagnosed_from_the_sphere(capsys):
+def test_a_partial_tumble_whose_full_base_fails_is_diagnosed_from_the_sphere(capsys, monkeypatch):
     """scikit-kinematics' YEI 3-Space log (tests/data/skinematics, BSD-3): a hand-held
-    magnetometer record covering about a third of the sphere. calib-jax mag chooses the
-    diagonal ellipsoid; the diagnosis's base containing it (the full ellipsoid) did not
-    converge, and calib-jax diagnose --sensor mag failed after 16 s saying to raise --max-iter,
-    an option it has not, and that calib-jax mag 'says why' (it had converged). Now the
-    diagnosis starts from the sphere, says why in a note and tests soft iron as an effect; the
-    base converges and the loop runs (the verdict itself is the loop's, not checked here)."""
+    magnetometer record covering about a third of the sphere. calib-jax mag chose the
+    diagonal ellipsoid there (it keeps the sphere now: test_mag_real); the diagnosis's base
+    containing it, the full ellipsoid, did not converge, and calib-jax diagnose --sensor mag
+    failed after 16 s saying to raise --max-iter, an option it has not, and that calib-jax
+    mag 'says why' (it had converged). With mag's old choice put back, the diagnosis now
+    starts from the sphere, says why in a note and tests soft iron as an effect; the base
+    converges and the loop runs (the verdict itself is the loop's, not checked here)."""
     from pathlib import Path
 
+    import calib_jax.mag
+
+    fit = calib_jax.mag.calibrate_mag
+
+    def old_choice(x, model="auto", **kw):
+        return fit(x, model="diag" if model == "auto" else model, **kw)
+
     path = Path(__file__).parent / "data" / "skinematics" / "data_yei.txt"
+    monkeypatch.setattr(calib_jax.mag, "calibrate_mag", old_choice)
     d = diagnose_mag(load_log(path, sensor="mag"), progress=False)
+    monkeypatch.undo()
     assert d.obs.base == "sphere", d.notes
     assert any(
         "the full ellipsoid base (containing calib-jax mag's choice, diag) did not converge" in n
