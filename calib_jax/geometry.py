@@ -44,7 +44,14 @@ def sum_last(terms: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
     ``jnp.sum`` calls write each term out and read it back. The 35 power sums of 1,000 sensors
     x 4,800 samples: 0.009 ms per sensor this way against 0.059 ms as 35 sums (2-core CPU,
     benchmarks/moment_pass.py). JAX has no derivative for a reduce with a user-written body;
-    the sums are linear, so the tangents are summed by ``jnp.sum`` (:func:`_sum_last_jvp`)."""
+    the sums are linear, so the tangents are summed by ``jnp.sum`` (:func:`_sum_last_jvp`).
+
+    The loop adds the samples one after the other: in float32 that is 0.4-1.1e-6 of the
+    largest power sum over 4,800 samples, against 1.4-3.8e-8 for ``jnp.sum``'s blocked sums
+    (float64: 1-2e-15 of an exactly rounded sum). Below float64 the terms are summed by
+    ``jnp.sum``, as before (tests/test_mag.py::test_power_sums_against_exact_sums)."""
+    if any(t.dtype != jnp.float64 for t in terms):
+        return tuple(jnp.sum(t, axis=-1) for t in terms)
     zeros = tuple(jnp.zeros((), t.dtype) for t in terms)
     return jax.lax.reduce(
         tuple(terms),

@@ -341,6 +341,28 @@ def test_moments_are_the_weighted_monomial_products():
     np.testing.assert_allclose(S, (phi * w[:, None]).T @ phi, rtol=1e-12, atol=1e-12 * w.sum())
 
 
+def test_power_sums_against_exact_sums():
+    """geometry.power_sums (one variadic reduce in float64) against math.fsum of the same
+    monomials (exactly rounded): 1e-14 of the largest sum over 4,800 samples (observed 2.3e-15).
+    float32 keeps jnp.sum's blocked sums: 1e-7 of the largest (observed 3.8e-8); the one loop
+    that adds the samples in turn gave 1.1e-6 here."""
+    import math
+
+    from calib_jax.geometry import _monomials, power_sums
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(4800, 3))
+    x = 1.02 * d / np.linalg.norm(d, axis=1, keepdims=True) + 0.05
+    w = rng.uniform(0.5, 2.0, 4800)
+    exact = np.array([math.fsum(m) for m in np.asarray(_monomials(jnp.asarray(x), jnp.asarray(w)))])
+    scale = np.abs(exact).max()
+    got = np.asarray(power_sums(jnp.asarray(x), jnp.asarray(w)))
+    assert np.abs(got - exact).max() <= 1e-14 * scale
+    x32, w32 = jnp.asarray(x, jnp.float32), jnp.asarray(w, jnp.float32)
+    got32 = np.asarray(jax.jit(power_sums)(x32, w32), float)
+    assert np.abs(got32 - exact).max() <= 1e-7 * scale
+
+
 def test_moments_differentiate_in_both_modes(tol):
     """The power sums are one variadic lax.reduce, which JAX cannot differentiate; their
     derivative comes from geometry._sum_last_jvp. Against the definition written out here:
