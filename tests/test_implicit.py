@@ -52,9 +52,15 @@ def test_forward_and_reverse_mode_agree(J):
 
 def test_equals_the_unrolled_loop_at_convergence(J):
     """Forward-mode through the LM iterations converges to the implicit derivative with the
-    iterates; the fit stops at relative steps of 1e-10 (eps2), so 1e-6 of the scale."""
+    iterates, but more slowly than they do (linearly, where the iterates converge
+    quadratically), and the fit stops on the iterates. Here it stops after 3 iterations: when
+    the third step is accepted the tangent is 4e-8 of the scale off; when it is rejected at the
+    round-off stop (CONVERGED_ROUNDOFF) the tangent is one step behind, 8.1e-5 off. Which of
+    the two happens turns on the last bits: P0 moved by 1e-15 relative flips it (so did the
+    batch moments' variadic reduce, through initial_guess), and 1e-6 failed. 1e-3 of the scale
+    allows one step's lag; a wrong derivative (a missing term) is off by O(1)."""
     Ju = np.asarray(jax.jit(jax.jacfwd(unrolled))(X, 1.0))
-    np.testing.assert_allclose(Ju, J, atol=1e-6 * np.abs(J).max())
+    np.testing.assert_allclose(Ju, J, atol=1e-3 * np.abs(J).max())
 
 
 @pytest.mark.parametrize("k", [(0, 0), (7, 1), (23, 2)])
