@@ -361,6 +361,16 @@ def _barely_turned(xv: np.ndarray, spread: float) -> bool:
     return spread <= BARELY_TURNED * noise
 
 
+def _rms_pct(e: np.ndarray) -> float:
+    """100 sqrt(mean(e^2)) of a relative error, without an e^2 temporary."""
+    return float(100 * np.sqrt(np.dot(e, e) / len(e))) if len(e) else float("nan")
+
+
+def _norms(v: np.ndarray) -> np.ndarray:
+    """Row norms of v (N, 3) without an (N, 3) temporary (np.linalg.norm squares into one)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
 def _check_not_flat(
     xn: np.ndarray, xv: np.ndarray, mean: np.ndarray, s: float, what: str = "field"
 ) -> None:
@@ -375,7 +385,7 @@ def _check_not_flat(
         else:
             cs, _ = sphere_fit_points(xn)
         dirs = xn - cs
-        dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)  # in place
+        dirs /= np.maximum(_norms(dirs), 1e-300)[:, None]  # in place
         _, min_eig, unseen = sphere_coverage(dirs)
         normal = unseen if min_eig < FLAT else None
     if normal is None:
@@ -510,7 +520,8 @@ def calibrate_mag(
     units = units or stated_unit  # the header's 'X (µT)' labels the report, as --units does
     _check_options(model, solver, field)
     xv, mean, s, warn = _screened(x)
-    xn = (xv - mean) / s
+    xn = xv - mean
+    xn /= s  # in place: a 3-hour 1 kHz log's samples are 260 MB a copy
     _check_not_flat(xn, xv, mean, s, "gravity" if sensor == "accel" else "field")
     opts = checked_solver_options(solver, solver_options)
     fits, chosen, selection = _fit_candidates(xn, model, solver, opts, warn)
@@ -551,12 +562,18 @@ def calibrate_mag(
         warn.append(POORLY_DETERMINED.format(", ".join(poor)))
 
     frac, ny = _calibrated_coverage(xv, centre, W, status, warn)
-    r0 = np.linalg.norm(xv - mean, axis=1)
-    before = r0 / r0.mean() - 1.0
-    nr = np.linalg.norm(xv, axis=1)
-    raw_err = nr / nr.mean() - 1.0
-    after = ny / radius - 1.0
-    rms_after = float(100 * np.sqrt(np.mean(after**2)))
+    # relative radial errors, each made in place from its norms (a 3-hour 1 kHz log: 86 MB
+    # an array; the peak memory of `calib-jax mag` was here and in _plausibility)
+    before = _norms(xn)  # |x - mean| / s: the scale cancels below, and no (N, 3) temporary
+    before /= before.mean()
+    before -= 1.0
+    raw_err = _norms(xv)
+    raw_err /= raw_err.mean()
+    raw_err -= 1.0
+    after = ny
+    after /= radius
+    after -= 1.0
+    rms_after = _rms_pct(after)
 
     if (
         # off any shell (a ball of noise), or a shell that ran away to pass through the ball
@@ -599,9 +616,9 @@ def calibrate_mag(
         radius=radius,
         model=chosen,
         status=status,
-        rms_before_pct=float(100 * np.sqrt(np.mean(before**2))),
+        rms_before_pct=_rms_pct(before),
         rms_after_pct=rms_after,
-        rms_raw_pct=float(100 * np.sqrt(np.mean(raw_err**2))),
+        rms_raw_pct=_rms_pct(raw_err),
         semi_axes=semi_axes,
         dcm=R,
         stderr_center=stderr_center,
@@ -637,10 +654,12 @@ def _calibrated_coverage(
     """(the share of the sphere of directions the calibrated samples cover, their norms |y|),
     y = W (x - c); below half, unless the fit failed anyway, a warning in ``warn``. Taken on
     the calibrated sphere: directions about a sphere fitted to distorted data overstate it."""
-    y = (x - centre) @ W.T
-    ny = np.linalg.norm(y, axis=1)
+    y = x @ W.T  # W (x - c), one (N, 3) array: y is made unit in place below
+    y -= centre @ W.T
+    ny = _norms(y)
     if np.all(np.isfinite(y)):
-        frac, _, unseen = sphere_coverage(y / ny[:, None])
+        y /= ny[:, None]
+        frac, _, unseen = sphere_coverage(y)
     else:
         frac, unseen = 0.0, np.full(3, np.nan)
     if frac < 0.5 and status != "failed":
@@ -690,10 +709,11 @@ def _plausibility(
     if not is_usable(status):
         return status
     what = "magnetometer" if sensor == "mag" else "sensor"
-    rms_before = float(100 * np.sqrt(np.mean(before**2)))
+    rms_before = _rms_pct(before)
     # sample-to-sample scatter of the calibrated norm: the noise (in time order)
     d = np.diff(after)
-    noise = float(100 * 1.4826 * np.median(np.abs(d)) / np.sqrt(2)) if len(d) else 0.0
+    np.abs(d, out=d)
+    noise = float(100 * 1.4826 * np.median(d, overwrite_input=True) / np.sqrt(2)) if len(d) else 0.0
     implausible = rms_after > RMS_PLAUSIBLE_PCT and rms_after > NOISE_RATIO * noise
     if not (np.isfinite(rms_after) and rms_after <= RMS_NO_SHELL_PCT) or implausible:
         best = rms_after if model == "full" else full_rms()
