@@ -654,8 +654,8 @@ def _calibrated_coverage(
     """(the share of the sphere of directions the calibrated samples cover, their norms |y|),
     y = W (x - c); below half, unless the fit failed anyway, a warning in ``warn``. Taken on
     the calibrated sphere: directions about a sphere fitted to distorted data overstate it."""
-    y = x @ W.T  # W (x - c), one (N, 3) array: y is made unit in place below
-    y -= centre @ W.T
+    y = x - centre  # then W (x - c), made unit in place below (x W^T - c W^T would cancel)
+    y = y @ W.T
     ny = _norms(y)
     if np.all(np.isfinite(y)):
         y /= ny[:, None]
