@@ -37,6 +37,7 @@ from calib_jax.geometry import (  # noqa: E402
     _monomials,
     centre_and_scale,
     moments_from_power_sums,
+    variadic_sum,
 )
 
 
@@ -56,9 +57,11 @@ def _moments_6x10(x, w):
     return jnp.concatenate([A, bottom], axis=0) * d[:, None] * d[None, :]
 
 
-def sums_pass(raw, valid):
+def sums_pass(raw, valid, variadic: bool = False):
     """The pass before the variadic reduce: the mean by a matrix product, then the 35 power
-    sums about it as separate ``jnp.sum`` calls (each monomial written out and read back)."""
+    sums about it as separate ``jnp.sum`` calls (each monomial written out and read back).
+    ``variadic``: the sums by geometry.variadic_sum on any device (calib_jax takes it on the
+    CPU only until a GPU has measured it: the "variadic (forced)" row)."""
 
     def one(args):
         r, v = args
@@ -69,13 +72,17 @@ def sums_pass(raw, valid):
         n = jnp.where(n > 0, n, 1.0)
         mean = (w @ x) / n
         mono = _monomials(jnp.where(v[:, None], x - mean, 0.0), w)
-        P = jnp.stack([jnp.sum(m, axis=-1) for m in mono], axis=-1)
+        if variadic:
+            P = jnp.stack(variadic_sum(mono), axis=-1)
+        else:
+            P = jnp.stack([jnp.sum(m, axis=-1) for m in mono], axis=-1)
         square = sum(P[_POWER_INDEX[e]] for e in [(2, 0, 0), (0, 2, 0), (0, 0, 2)])
         k = jnp.sqrt(square / n)
         k = jnp.where(k > 0, k, 1.0)
         return moments_from_power_sums(P, k), mean, k
 
-    return jax.lax.map(one, (raw, valid), batch_size=8)
+    chunk = min(MOMENT_CHUNK.get(jax.default_backend(), MOMENT_CHUNK["gpu"]), raw.shape[0])
+    return jax.lax.map(one, (raw, valid), batch_size=chunk)
 
 
 def first_pass(raw, valid):
@@ -115,7 +122,14 @@ def main() -> None:
     s_first, s_old, s_new = first(raw, valid)[0], old(raw, valid)[0], new(raw, valid)[0]
     diff = float(jnp.max(jnp.abs(s_old - s_new)) / jnp.max(jnp.abs(s_old)))
     diff_first = float(jnp.max(jnp.abs(s_first - s_new)) / jnp.max(jnp.abs(s_first)))
-    passes = {"first": first, "previous": old, "current": new, "copy": lambda r, v: copy(r)}
+    forced = jax.jit(functools.partial(sums_pass, variadic=True))
+    passes = {
+        "first": first,
+        "previous": old,
+        "current": new,
+        "variadic": forced,
+        "copy": lambda r, v: copy(r),
+    }
     for c in args.chunks:
         passes[f"chunk {c}"] = jax.jit(functools.partial(_batch_moments, chunk=c))
         s_c = passes[f"chunk {c}"](raw, valid)[0]
@@ -143,6 +157,7 @@ def main() -> None:
         "previous_gb_per_s": gbs["previous"],
         "current_gb_per_s": gbs["current"],
         "current_fraction_of_copy_ceiling": gbs["current"] / copy_gbs,
+        "variadic_forced_ms_per_sensor": ms["variadic"],
         "default_chunk": MOMENT_CHUNK.get(jax.default_backend(), MOMENT_CHUNK["gpu"]),
         "chunks_ms_per_sensor": {k[6:]: ms[k] for k in ms if k.startswith("chunk ")},
         "best_chunk": min(args.chunks, key=lambda c: ms[f"chunk {c}"]) if args.chunks else None,
@@ -156,6 +171,7 @@ def main() -> None:
         "first": "first (normalise, 6 x 10 product)",
         "previous": "previous (mean by a product, 35 separate sums)",
         "current": f"current (one reduce per pass), {row['default_chunk']} sensors per step",
+        "variadic": "variadic (forced on any device: the mean by a product, one reduce)",
     }
     names.update({f"chunk {c}": f"current, {c or 'all'} sensors per step" for c in args.chunks})
     for k, name in names.items():

@@ -49,9 +49,17 @@ def sum_last(terms: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
     The loop adds the samples one after the other: in float32 that is 0.4-1.1e-6 of the
     largest power sum over 4,800 samples, against 1.4-3.8e-8 for ``jnp.sum``'s blocked sums
     (float64: 1-2e-15 of an exactly rounded sum). Below float64 the terms are summed by
-    ``jnp.sum``, as before (tests/test_mag.py::test_power_sums_against_exact_sums)."""
-    if any(t.dtype != jnp.float64 for t in terms):
+    ``jnp.sum``, as before (tests/test_mag.py::test_power_sums_against_exact_sums).
+
+    Only on the CPU: the GPU rows of docs/performance.md were measured with separate sums and
+    no GPU has run the variadic form yet (``benchmarks/moment_pass.py`` on one decides)."""
+    if any(t.dtype != jnp.float64 for t in terms) or jax.default_backend() != "cpu":
         return tuple(jnp.sum(t, axis=-1) for t in terms)
+    return variadic_sum(terms)
+
+
+def variadic_sum(terms: tuple[jax.Array, ...]) -> tuple[jax.Array, ...]:
+    """:func:`sum_last`'s one ``lax.reduce`` on any device and dtype (not differentiable)."""
     zeros = tuple(jnp.zeros((), t.dtype) for t in terms)
     return jax.lax.reduce(
         tuple(terms),
