@@ -14,7 +14,7 @@ Host side (checks, normalisation, model choice) around a pure jitted core:
 5. model: sphere (hard iron only), diag (axis-aligned ellipsoid), full, or ``auto``: the one
    with the lowest BIC of the radial error among those the data determine (every standard
    error under 1 %), else the sphere (the fewest parameters, with a warning naming the
-   lowest-BIC model);
+   lowest-BIC model; if the sphere runs away, the lowest BIC among the bounded fits);
 6. radius: the known field magnitude if given (output in its units), else det(M)^(-1/6) in raw
    units (det W = 1, MATLAB magcal's convention);
 7. report the RMS radial error before (centred on the data mean) and after, in percent;
@@ -413,8 +413,9 @@ def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:
 
     fits: model -> (result, c_n, M_n, mean square radial error in units of s, BIC, mean square
     relative radial error |W (x - c)| / r - 1). ``model="auto"`` takes the lowest BIC among
-    the fits that converged to a bounded, well-determined ellipsoid (appending to ``warn``
-    when none is well determined)."""
+    the fits that converged to a bounded, well-determined ellipsoid; when none is well
+    determined, the sphere (the lowest BIC of the bounded fits if the sphere is not one), with
+    a warning in ``warn``."""
     candidates = MAG_MODELS if model == "auto" else (model,)
     n = len(xn)
     fits: dict[str, tuple[LMResult, np.ndarray, np.ndarray, float, float, float]] = {}
@@ -448,23 +449,29 @@ def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:
     if model != "auto":
         return fits, model, selection
     # the lowest BIC among the well-determined fits; when none is, the sphere, the fewest
-    # parameters: on a third of the sphere (scikit-kinematics' YEI log) the lowest BIC was a
-    # diagonal soft iron with one semi-axis 3.4x shorter than the others, saved with exit 0
-    chosen = min(determined, key=lambda m: determined[m][4]) if determined else "sphere"
-    if usable and not determined:
-        best = min(usable, key=lambda m: usable[m][4])
-        warn.append(
-            "no candidate model is well determined by these data: the sphere (hard iron only) is "
-            "kept"
-            + (
-                f"; {best} had the lowest BIC (rms {selection[best]['rms_pct']:.3g} % against "
-                f"{selection['sphere']['rms_pct']:.3g} %), but its soft iron is not pinned down; "
-                "record more orientations, or declare it with --model"
-                if best != "sphere" and "sphere" in selection
-                else ""
-            )
+    # parameters (on a third of the sphere, scikit-kinematics' YEI log, the lowest BIC was a
+    # diagonal soft iron with one semi-axis 3.4x shorter than the others, saved with exit 0),
+    # unless the sphere itself did not converge to a bounded fit: then the lowest BIC of those
+    # that did; none at all, the sphere
+    if determined:
+        return fits, min(determined, key=lambda m: determined[m][4]), selection
+    if not usable:
+        return fits, "sphere", selection
+    best = min(usable, key=lambda m: usable[m][4])
+    if "sphere" not in usable:
+        warn.append("no candidate model is well determined by these data")
+        return fits, best, selection
+    warn.append(
+        "no candidate model is well determined by these data: the sphere (hard iron only) is kept"
+        + (
+            f"; {best} had the lowest BIC (rms {selection[best]['rms_pct']:.3g} % against "
+            f"{selection['sphere']['rms_pct']:.3g} %), but its soft iron is not pinned down; "
+            "record more orientations, or declare it with --model"
+            if best != "sphere"
+            else ""
         )
-    return fits, chosen, selection
+    )
+    return fits, "sphere", selection
 
 
 def calibrate_mag(

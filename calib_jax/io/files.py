@@ -1144,7 +1144,7 @@ def _time_last(cols: list[str], why: str, data: np.ndarray | None, path) -> tupl
 def _clocks_at_an_end(
     width: int, data: np.ndarray | None, sensor: str | None
 ) -> tuple[list[str], str] | None:
-    """Headerless columns that are a known layout (3, 6 or 9 sensor columns) beside one or two
+    """Headerless columns that are a known layout (6 or 9 sensor columns) beside one or two
     columns that only rise, all at one end: logger clocks. Pololu's MinIMU-9 logs
     (scikit-kinematics) end with the acc/gyro and the magnetometer clocks in ms, and were
     refused for 11 columns, with a --columns example for mag that named the accelerometer's
