@@ -686,14 +686,17 @@ def judge_fit(
     residual, a non-ellipsoid or extreme semi-axes). Returns the status and the warnings."""
     warn: list[str] = []
     _, ny = _calibrated_coverage(x, centre, W, status, warn)
-    r0 = np.linalg.norm(x - x.mean(axis=0), axis=1)
-    after = ny / radius - 1.0
-    rms_after = float(100 * np.sqrt(np.mean(after**2)))
+    before = _norms(x - x.mean(axis=0))
+    before /= before.mean()
+    before -= 1.0
+    after = ny
+    after /= radius
+    after -= 1.0
+    rms_after = _rms_pct(after)
     semi_axes, _ = ellipsoid_axes(W.T @ W / radius**2)
     status = _plausibility(
-        status, model, rms_after, lambda: rms_after, r0 / r0.mean() - 1.0, after, semi_axes,
-        "mag", warn,
-    )  # fmt: skip
+        status, model, rms_after, lambda: rms_after, before, after, semi_axes, "mag", warn
+    )
     return status, warn
 
 
