@@ -1030,11 +1030,12 @@ def _add_diagnose_parser(sub) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("auto", "full", "sphere"),
+        choices=("auto", "full", "diag", "sphere"),
         default="auto",
         help="mag: the declared model; auto (default): the one calib-jax mag chooses for the "
-        "log (sphere makes soft_iron a candidate). marg: the ellipsoid fitted to each sensor "
-        "first (auto: full; sphere for a log that turns too little for an ellipsoid)",
+        "log (on sphere or diag, soft_iron is a candidate: the rest of the full ellipsoid). "
+        "marg: the ellipsoid fitted to each sensor first (auto: full; diag or sphere for a "
+        "log that turns too little for an ellipsoid)",
     )
     p.add_argument("--degree", type=int, choices=(1, 2), default=1, help="effect polynomial degree")
     p.add_argument("--seed", type=int, default=0, help="seed of the null-test simulations")

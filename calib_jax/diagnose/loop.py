@@ -105,7 +105,7 @@ CATALOGUE = {
     "scale_nonlinearity": "per-axis quadratic in the axis' own reading (+g/-g asymmetry)",
     "outliers": "observations inconsistent with the rest, rejected",
     "hard_iron_drift": "magnetometer centre linear in time",
-    "soft_iron": "sphere to ellipsoid",
+    "soft_iron": "sphere or diagonal ellipsoid to the full ellipsoid",
     "sensor_misalignment": "rotation between magnetometer and accelerometer frames (MARG)",
     "timing_offset": "time shift between accelerometer and magnetometer samples (MARG)",
 }
@@ -155,7 +155,7 @@ class Observations:
     c0: np.ndarray
     k0: float
     theta0: np.ndarray
-    base: str  # "full" or "sphere"
+    base: str  # "full", "diag" or "sphere" (mag; accel: "full")
     sensor: str
     kind: str  # "interval means" or "samples"
     notes: list[str] = field(default_factory=list)
@@ -553,7 +553,8 @@ def _jackknife(P: _Problems, theta, w, free, block) -> list[dict]:
 
 def _effect_of(effect, sl, fit) -> tuple[np.ndarray, np.ndarray]:
     """An effect's coefficients in a fit, zero where the effect is absent, and their formal
-    standard errors. Soft iron's are gains 2 and 3 less gain 1, and the cross terms: its
+    standard errors. ``sl``: the parameters the effect frees beyond the current model. Soft
+    iron's are gains 2 and 3 less gain 1 (on a sphere base), and the cross terms: its
     absence is a sphere, not zero gains (which Hotelling's test then rejected at p ~ 1e-25 on
     every clean log, and whose halves always agreed within a quarter of a gain of about 1).
     The difference's error is taken as sqrt(se_j^2 + se_1^2), the covariance left out."""
@@ -565,13 +566,14 @@ def _effect_of(effect, sl, fit) -> tuple[np.ndarray, np.ndarray]:
     return coef, np.where(gain, np.hypot(se, fit["stderr"][0]), se)
 
 
-def _honest_tests(entry, d, fits, jack, held_cur, block, w, degree, tried) -> None:
+def _honest_tests(entry, d, fits, jack, held_cur, block, w, free, degree, tried) -> None:
     """Add the held-out, halves and honest-significance tests (:mod:`.honest`) to a
     candidate's entry, from its halves (``fits``) and leave-one-block-out refits ``jack``;
-    ``tried``: the round's number of candidates."""
+    ``free``: the current model's mask (a diagonal base's gains are not soft iron's to
+    test); ``tried``: the round's number of candidates."""
     c = entry["effect"]
     sl = _indices(_slots(c, degree))
-    sl = sl[d["free"][sl]]
+    sl = sl[d["free"][sl] & ~free[sl]]
     (coef, se), (c1, se1), (c2, se2) = (_effect_of(c, sl, fits[d[k]]) for k in ("real", "h1", "h2"))
     h = judge(
         coef,
@@ -708,7 +710,9 @@ def _run(
                 jack_cur = _jackknife(P, cur["theta"], w, free, block)
             jack = _jackknife(P, fit["theta"], w, d["free"], block)
             held_cur = held_out_rms([f["e"] for f in jack_cur], block, w)
-            _honest_tests(entries[c], d, fits, jack, held_cur, block, w, degree, len(remaining))
+            _honest_tests(
+                entries[c], d, fits, jack, held_cur, block, w, free, degree, len(remaining)
+            )
             if all(entries[c]["tests"].values()):
                 best = (c, fit, d["free"], jack)
                 break
@@ -1014,14 +1018,18 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     )
 
 
+_ELLIPSOID = {"full": "full ellipsoid", "diag": "diagonal ellipsoid", "sphere": "sphere"}
+
+
 def _base_failure_advice(obs, status: int) -> str:
     """Why a diagnosis's base fit failed and what to change, in this command's own options
     (status_message's advice names --max-iter, which calib-jax diagnose has not)."""
     why = status_message(status).split("; with data that do")[0]
-    if obs.sensor == "mag" and obs.base == "full":
+    if obs.sensor == "mag" and obs.base != "sphere":
+        simpler = "--model diag or --model sphere" if obs.base == "full" else "--model sphere"
         return (
-            f"{why}; the full ellipsoid is not determined by these samples: declare the sphere "
-            "base (--model sphere), or record more orientations"
+            f"{why}; the {_ELLIPSOID[obs.base]} is not determined by these samples: declare a "
+            f"simpler base ({simpler}), or record more orientations"
         )
     return f"{why}; calib-jax {obs.sensor} on this log says what the fit lacks"
 
@@ -1250,11 +1258,13 @@ def diagnose_mag(
     """Close the loop on a magnetometer free-rotation log (module docstring).
 
     Observations are samples (every k-th, at most ``max_points``); the error is
-    (|m| - radius) / radius. ``model`` is the declared model: "full" (ellipsoid) or "sphere"
-    (hard iron only; ``soft_iron`` is then a candidate); "auto" (the default) declares the
-    model :func:`calib_jax.calibrate_mag` chooses for the log, so the diagnosis starts from
-    the calibration ``calib-jax mag`` gives (a sphere where it is the sphere; the full
-    ellipsoid where it chooses the full or the diagonal one). Floors, from the longest rest if the
+    (|m| - radius) / radius. ``model`` is the declared model, one of
+    :func:`calib_jax.calibrate_mag`'s kinds: "full" (ellipsoid), "diag" (axis-aligned
+    ellipsoid; ``soft_iron`` then tests the cross terms) or "sphere" (hard iron only;
+    ``soft_iron`` tests the whole ellipsoid); "auto" (the default) declares the model
+    calibrate_mag chooses for the log, so the diagnosis starts from the calibration
+    ``calib-jax mag`` gives. Where that model's base does not converge here (a partial tumble),
+    the diagnosis starts from the sphere instead, with a note. Floors, from the longest rest if the
     log has one: the per-sample scatter of the calibrated magnitude about a quadratic trend
     (white) and its Allan deviation at one sample; without a rest, the first-difference noise.
     ``progress``: a bar over the rounds, as in :func:`diagnose_accel`.
@@ -1265,8 +1275,8 @@ def diagnose_mag(
     t = t_log if t is None else t
     temp = temp_log if temp is None else temp
     sample_rate = sample_rate or rate
-    if model not in ("auto", "full", "sphere"):
-        raise ValueError(f"model must be 'auto', 'full' or 'sphere', got {model!r}")
+    if model not in ("auto", *_ELLIPSOID):
+        raise ValueError(f"model must be 'auto', 'full', 'diag' or 'sphere', got {model!r}")
     ok, screen_notes = screen_samples(x, "mag")  # the way in of calibrate_mag
     n = len(x)
     if t is None:
@@ -1287,13 +1297,10 @@ def diagnose_mag(
     chose = []
     if model == "auto":  # calib-jax mag's choice (the ROS flight's full ellipsoid was 'not
         # determined' for mag and declared here, fitted without a word)
-        model = "sphere" if cal.model == "sphere" else "full"
+        model = cal.model
+        others = " or ".join(k for k in _ELLIPSOID if k != model)
         chose.append(
-            f"declared model: {model}, as calib-jax mag chooses for this log; --model full or "
-            "sphere declares another"
-            if model == cal.model
-            else f"declared model: full, the base containing calib-jax mag's choice for this "
-            f"log ({cal.model}: the diagnosis's bases are sphere and full); --model sphere "
+            f"declared model: {model}, as calib-jax mag chooses for this log; --model {others} "
             "declares another"
         )
     if cal.status in ("failed", "not_converged"):
@@ -1324,18 +1331,17 @@ def diagnose_mag(
         progress=progress,
     )
     obs, res, floors = loop(cal, model, chose + screen_notes)
-    if not res["base"]["converged"] and declared != "declared" and model == "full":
-        # calib-jax mag chose a diagonal or full ellipsoid, but the diagnosis's full base does
-        # not converge on this log (a partial tumble: the YEI 3-Space log of scikit-kinematics,
-        # 32 % of the sphere, failed here and pointed at an iteration budget diagnose has not):
-        # start from the sphere and test soft iron as an effect instead
+    if not res["base"]["converged"] and declared != "declared" and model != "sphere":
+        # calib-jax mag chose an ellipsoid whose base does not converge here (a partial
+        # tumble: the YEI 3-Space log of scikit-kinematics, 32 % of the sphere, failed with
+        # the full base and pointed at an iteration budget diagnose has not): start from the
+        # sphere and test soft iron as an effect instead
         sphere = calibrate_mag(x[ok], model="sphere")
         if sphere.status not in ("failed", "not_converged"):
             note = (
-                f"declared model: sphere; the full ellipsoid base (containing calib-jax mag's "
-                f"choice, {cal.model}) did not converge on this log, so the diagnosis starts "
-                "from the sphere and tests soft iron as an effect; --model full declares the "
-                "full base"
+                f"declared model: sphere; the {_ELLIPSOID[model]} base (calib-jax mag's "
+                "choice) did not converge on this log, so the diagnosis starts from the sphere "
+                f"and tests soft iron as an effect; --model {model} declares that base"
             )
             obs, res, floors = loop(sphere, "sphere", [note, *screen_notes])
     return _finish(obs, res, floors, "% of the field", source, 1e2)
@@ -1344,8 +1350,9 @@ def diagnose_mag(
 def _mag_loop(
     x, ok, keep, t, temp, k, cal, model, notes, *, candidates, sample_rate, seed, degree, progress
 ):
-    """diagnose_mag's observations from the base calibration ``cal`` (model "sphere" or
-    "full"), its floors, and the loop's result: (obs, res, (white, allan))."""
+    """diagnose_mag's observations from the base calibration ``cal`` (``model``: its kind,
+    "sphere", "diag" or "full"), its floors, and the loop's result: (obs, res, (white,
+    allan))."""
     W, c, R = np.asarray(cal.soft_iron), np.asarray(cal.center), float(cal.radius)
     k0 = R / np.cbrt(np.linalg.det(W))
     alpha_n = np.linalg.inv(W * k0 / R)
@@ -1373,7 +1380,7 @@ def _mag_loop(
         cc
         for cc in candidates
         if (temp is not None or not cc.startswith("temperature"))
-        and (cc != "soft_iron" or model == "sphere")
+        and (cc != "soft_iron" or model != "full")
     )
     if temp is None:
         obs.notes.append("no temperature column: temperature effects not tested")

@@ -18,7 +18,8 @@ boolean mask ``free``. A parameter that is not free is multiplied out of the mod
 to 0 by one extra residual row, so every candidate model is the SAME compiled function: the
 diagnosis fits the base model, each candidate, split halves and null simulations with one
 compilation (:func:`fit_each`). The magnetometer's sphere model ties gains 2 and 3 to gain 1
-and the cross terms to 0 unless the ``soft_iron`` slots are free.
+and the cross terms to 0, its diagonal model the cross terms, unless the ``soft_iron`` slots
+are free.
 """
 
 from __future__ import annotations
@@ -52,15 +53,19 @@ SLOTS: dict[str, slice] = {
 
 
 def mask(*slots: str, base: str = "full") -> np.ndarray:
-    """Free-parameter mask: the base model ("full": alpha and b; "sphere": one gain and b)
-    plus the named slots (``"soft_iron"`` frees gains 2-3 and the cross terms)."""
+    """Free-parameter mask: the base model (the magnetometer's kinds of
+    :func:`calib_jax.calibrate_mag`: "full": alpha and b; "diag": three gains and b; "sphere":
+    one gain and b) plus the named slots (``"soft_iron"`` frees the gains and the cross
+    terms: the rest of the full ellipsoid)."""
     free = np.zeros(N_THETA, bool)
     if base == "full":
         free[0:9] = True
+    elif base == "diag":
+        free[[0, 1, 2, 6, 7, 8]] = True
     elif base == "sphere":
         free[[0, 6, 7, 8]] = True
     else:
-        raise ValueError(f"base must be 'full' or 'sphere', got {base!r}")
+        raise ValueError(f"base must be 'full', 'diag' or 'sphere', got {base!r}")
     for s in slots:
         if s == "soft_iron":
             free[[1, 2, 3, 4, 5]] = True
