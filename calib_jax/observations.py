@@ -233,7 +233,8 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
     tried = len(report.candidates)
     # a setting whose means scatter off every ellipsoid found noise, not poses: its count of
     # directions about the fitted centre means nothing (a board that never moved has dozens)
-    on_sphere = [c for c in report.candidates if not c.rms > SPHERE_RMS]
+    # (nor does one that took motion for poses: a six-face log counted its turns)
+    on_sphere = [c for c in report.candidates if not c.rms > SPHERE_RMS and not c.motion]
     most = max((c.n_poses for c in on_sphere), default=0)
     setting = report.setting(sample_rate).removeprefix("static detection: ")
     found = f"found {report.n_intervals} static intervals with {setting}"

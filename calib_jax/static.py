@@ -95,6 +95,14 @@ OFF_SPHERE = 8.0
 # scores closer than this (relative) are statistically the same: the dof-corrected rms of
 # n - 9 residuals scatters by 1 / sqrt(2 (n - 9)), 10 % at n = 60
 SCORE_TIE = 0.1
+# a candidate whose means misfit their ellipsoid by more than this many times the median
+# misfit over the sweep took motion for poses, and is not scored: a six-face log with turns
+# between the faces (sensbiotk's FOX calibration, 200 Hz) held its 6 faces at 1e-3 under most
+# settings, and only loose thresholds found the 12 poses a score needs, by counting the slow
+# parts of the turns, at 8e-3 to 2e-2 (7-17x the median). Scorable candidates of 15 real logs
+# with genuine poses lie within 2.2x of their sweep's median (a hand-held MPU-9150 with pauses
+# the highest), of the hand-held x-io log that is never turned over, 60x
+LEAK_RATIO = 4.0
 # consecutive interval means closer than this fraction of the radius (~6 degrees) are one pose
 # (split by a noise spike, or the settling just after the pose was taken): protocols move
 # further than that from one pose to the next
@@ -166,6 +174,9 @@ class Candidate:
     n_held: int = 0
     """Intervals that start a new pose (neither a split nor the rest of a run cut by an
     invalid sample): the poses found, closer than 10 degrees included."""
+    motion: bool = False
+    """Not scored: its means misfit their ellipsoid by ``LEAK_RATIO`` times the sweep's median
+    or more (motion taken for poses)."""
 
     def to_dict(self) -> dict:
         return {
@@ -179,6 +190,7 @@ class Candidate:
             "n_off": self.n_off,
             "n_split": self.n_split,
             "n_held": self.n_held,
+            "motion": self.motion,
         }
 
 
@@ -219,6 +231,9 @@ class StaticReport:
     standard deviations off the ellipsoid through the others."""
     extra_notes: list[str] = field(default_factory=list)
     """Anything else the detector did that a report should say (interleaved empty rows)."""
+    n_leaky: int = 0
+    """Candidates not scored although they found enough poses: their means misfit their
+    ellipsoid by more than ``LEAK_RATIO`` times the sweep's median (motion taken for poses)."""
 
     @property
     def n_intervals(self) -> int:
@@ -245,17 +260,27 @@ class StaticReport:
             if self.factor is not None
             else f"threshold {self.threshold:.3g} (given)"
         )
+        none = (
+            f"none of {len(self.candidates)} candidates found {MIN_POSES} distinct poses to score"
+        )
+        if self.n_leaky:
+            none = (
+                f"no candidate of {len(self.candidates)} could be scored: the {self.n_leaky} that "
+                f"found {MIN_POSES} distinct poses or more took motion for poses, their means "
+                f"misfitting their ellipsoid by {LEAK_RATIO:g}x the median over the candidates "
+                "or more"
+            )
         how = {
-            "sweep": f"chosen by fit score from {len(self.candidates)} candidates",
-            "default": (
-                f"classic default: none of {len(self.candidates)} candidates found "
-                f"{MIN_POSES} distinct poses to score"
+            "sweep": f"chosen by fit score from {len(self.candidates)} candidates"
+            + (
+                f"; {self.n_leaky} not scored: their means misfit their ellipsoid "
+                f"{LEAK_RATIO:g}x or more the median (motion taken for poses)"
+                if self.n_leaky
+                else ""
             ),
+            "default": f"classic default: {none}",
             "given": "as given",
-            "most_poses": (
-                f"none of {len(self.candidates)} candidates found {MIN_POSES} distinct poses to "
-                "score; kept one that found the count most settings found"
-            ),
+            "most_poses": f"{none}; kept one that found the count most settings found",
         }[self.how]
         stride = f", on every {self.stride}th sample" if self.stride > 1 else ""
         return (
@@ -359,6 +384,7 @@ class StaticReport:
             "intervals": [[iv.start, iv.stop] for iv in self.intervals],
             "chosen": self.chosen,
             "rejected": [list(r) for r in self.rejected],
+            "n_leaky": self.n_leaky,
             "candidates": [c.to_dict() for c in self.candidates],
         }
 
@@ -1012,6 +1038,7 @@ def detect_static(
             settings.append((w, f, thr, noise))
             covered.append(int(np.sum(b - a)))
 
+    candidates, n_leaky = _without_leaks(candidates)
     best = _choose(candidates, covered)
     few = None  # nothing scorable, but settings found several poses: the count most settings
     # agree on (ties: the larger). Not the most any found: the loosest threshold lets a turn in
@@ -1025,7 +1052,21 @@ def detect_static(
             spread = abs(np.log((c.factor or DEFAULT_FACTOR) / DEFAULT_FACTOR))
             return (-spread, c.n_held, -c.n_split)
 
-        few = max((i for i, c in enumerate(candidates) if c.n_poses == most), key=rank)
+        ranked = sorted(
+            (i for i, c in enumerate(candidates) if c.n_poses == most), key=rank, reverse=True
+        )
+
+        def refined_poses(i: int) -> int:
+            # the sweep counts the raw runs; the chosen setting's runs are then refined, and a
+            # pose held with a slight wobble can lose its run there (a six-face FOX log lost
+            # its +x face at a 1 s window, and with it the six-parameter fit)
+            w, f, _, noise = settings[i]
+            _, a, b, _ = run(w, f, _moving_variance(c1, c2, cn, w), noise, refine=trim is None)
+            means = (c1[b] - c1[a]) / (b - a)[:, None] + mu if len(a) else np.zeros((0, 3))
+            rms, n_poses, _ = ellipsoid_score(means)
+            return n_poses if np.isfinite(rms) else _count_directions(means) if len(a) else 0
+
+        few = next((i for i in ranked if refined_poses(i) >= most), ranked[0])
 
     if single:
         how, chosen = "given", None
@@ -1083,7 +1124,24 @@ def detect_static(
         candidates=candidates,
         chosen=chosen,
         rejected=rejected,
+        n_leaky=n_leaky,
     )
+
+
+def _without_leaks(candidates: list[Candidate]) -> tuple[list[Candidate], int]:
+    """The candidates with those that took motion for poses made unscorable (score inf; see
+    :data:`LEAK_RATIO`), and how many they were."""
+    rms = np.array([c.rms for c in candidates], float)
+    finite = np.isfinite(rms)
+    if not finite.any():
+        return candidates, 0
+    limit = LEAK_RATIO * float(np.median(rms[finite]))
+    leaky = [np.isfinite(c.score) and c.rms > limit for c in candidates]
+    out = [
+        replace(c, score=float("inf"), motion=True) if bad else c
+        for c, bad in zip(candidates, leaky, strict=True)
+    ]
+    return out, int(sum(leaky))
 
 
 def _interleaved_gaps(valid: np.ndarray) -> bool:
