@@ -448,6 +448,29 @@ def test_a_rate_among_settings_in_a_comment_line(tmp_path):
     assert load_log(_write(tmp_path, other, "b.csv")).sample_rate == pytest.approx(100.0)
 
 
+def test_xsens_rates_and_fusion_outputs(tmp_path):
+    """Two Xsens layouts a new user's run met (Allwillcome/XsensDot2Mtw4OpenSense, MIT). An
+    MT Manager export states '// Update Rate: 100.0Hz', and an Xsens DOT export a 'sep=,'
+    preamble with 'OutputRate:,60Hz': neither rate was read, so the detector ran in samples.
+    The DOT file holds only Quat_* and FreeAcc_* (gravity removed): it was refused with a
+    --columns example that mapped Quat_W, Quat_X, Quat_Y onto the accelerometer; it now says
+    that such columns are a fusion output, with nothing to calibrate."""
+    rows = [[472 + i, 9.3, 0.8, -3.1] for i in range(40)]
+    mtw = ["// Start Time: Unknown", "// Update Rate: 100.0Hz", "// Filter Profile: human"]
+    mtw += ["PacketCounter\tAcc_X\tAcc_Y\tAcc_Z"] + ["\t".join(map(str, r)) for r in rows]
+    assert load_log(_write(tmp_path, "\n".join(mtw) + "\n", "mtw.txt")).sample_rate == 100.0
+    dot = ["sep=,", "DeviceTag:,Yao", "OutputRate:,60Hz", "StartTime: ,2021-08-20_20:21:13"]
+    dot += ["", "PacketCounter,SampleTimeFine,Quat_W,Quat_X,Quat_Y,Quat_Z,FreeAcc_X,FreeAcc_Y,"]
+    dot[-1] += "FreeAcc_Z,Status"
+    dot += [f"{i},{16667 * i},1,0,0,0,0.01,0.02,-0.03,0" for i in range(40)]
+    path = _write(tmp_path, "\n".join(dot) + "\n", "dot.csv")
+    with pytest.raises(ValueError, match="sensor-fusion output .*nothing here to calibrate"):
+        load_log(path)
+    head = "\n".join(dot[:5] + ["PacketCounter,SampleTimeFine,Acc_X,Acc_Y,Acc_Z"]) + "\n"
+    raw = _write(tmp_path, head + "".join(f"{i},{i},9.8,0.1,0.2\n" for i in range(40)), "r.csv")
+    assert load_log(raw).sample_rate == 60.0
+
+
 def test_vendor_exports_read_without_flags(tmp_path):
     """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
     MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and

@@ -949,6 +949,8 @@ def _read_text(
         cells = [c for c in cells if c] if delim is not None else cells
         if len(cells) == 2 and not _num(cells[0]) and num(cells[1]):
             preamble[cells[0].lower()] = value(cells[1])
+        elif len(cells) == 2 and (rate := _rate_in_comment(" ".join(cells))) is not None:
+            preamble["sample rate"] = rate  # 'OutputRate:,60Hz' (Xsens DOT)
         else:
             ignored.append(ln.strip())
     if ignored:
@@ -1032,7 +1034,11 @@ def _header_cells(line: str, delim: str | None) -> list[str]:
     return [_strip_cell(c).lstrip("\ufeff") for c in cells]
 
 
-_RATE_KEYS = ("fs", "sample rate", "sample_rate", "samplerate", "rate", "hz", "frequency")
+_RATE_KEYS = (
+    "fs", "sample rate", "sample_rate", "samplerate", "rate", "hz", "frequency",
+    "sampling rate", "sampling frequency", "sample frequency", "data rate", "output rate",
+    "outputrate", "update rate",  # Xsens: MT Manager '// Update Rate: 100.0Hz', DOT 'OutputRate'
+)  # fmt: skip
 # the names a comment line may give a rate among other settings, with the unit Hz after it
 _RATE_KEYS_NAMED = ("sample rate", "sampling rate", "samplerate", "data rate", "odr", "fs")
 
@@ -1593,6 +1599,16 @@ def _assemble(
 
     acc, gyro, mag = triple("a"), triple("g"), triple("m")
     if acc is None and mag is None and gyro is None:
+        derived = [h for h in header or [] if _DERIVED.search(str(h))]
+        if len(derived) >= 3:
+            raise ValueError(
+                f"{path}: the columns hold a sensor-fusion output ({', '.join(derived[:7])}"
+                f"{', ...' if len(derived) > 7 else ''}): an orientation, or acceleration with "
+                "gravity removed, not raw sensor readings, so there is nothing here to "
+                "calibrate; export the raw accelerometer, gyroscope or magnetometer (Xsens: "
+                "Acc, Gyr, Mag; a phone: the uncalibrated sensors), or map raw columns this "
+                "file holds with --columns"
+            )
         if header is not None:
             eg = _named_example(header, data, sensor)
         else:
@@ -1779,6 +1795,16 @@ def _example(width: int, data: np.ndarray | None = None, sensor: str | None = No
     for axis, j in zip("xyz", free, strict=False):
         names[j] = _SENSORS.get(sensor, "a") + axis
     return ",".join(names)
+
+
+# names of sensor-fusion outputs, never raw readings: quaternions, Euler angles, rotation
+# matrices, acceleration with gravity removed, gravity itself (Xsens DOT's Quat_W and FreeAcc_X
+# were offered as the accelerometer in the --columns example)
+_DERIVED = re.compile(
+    r"quat|euler|roll|pitch|yaw|heading|free_?acc|lin(ear)?[_ ]?acc|gravity|^q[0-3wxyz]$"
+    r"|^mat\[",
+    re.I,
+)
 
 
 def _named_example(header: list[str], data: np.ndarray, sensor: str | None) -> str:
