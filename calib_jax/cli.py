@@ -344,6 +344,7 @@ def run_mag(args: argparse.Namespace) -> int:
 def run_batch(args: argparse.Namespace) -> int:
     _enable_x64()
     import json
+    from collections import Counter
 
     from .fleet import calibrate_files, calibrate_files_dask
 
@@ -357,7 +358,20 @@ def run_batch(args: argparse.Namespace) -> int:
         paths = sorted(str(p) for p in root.rglob(args.pattern) if p.is_file())
     if not paths:
         wanted = repr(args.pattern) if args.pattern else "a log's name (" + _LOG_NAMES + ")"
-        raise ValueError(f"no files matching {wanted} under {root}; set --pattern")
+        suffixes = Counter(p.suffix.lower() for p in every if p.suffix)
+        if not every:
+            raise ValueError(f"no files matching {wanted} under {root}: it is empty")
+        if not suffixes:
+            raise ValueError(
+                f"no files matching {wanted} under {root}: its {len(every)} file(s) have no "
+                "suffix; name them with --pattern (e.g. --pattern '*')"
+            )
+        common = suffixes.most_common(1)[0][0]
+        found = ", ".join(f"{n} {sfx}" for sfx, n in suffixes.most_common(4))
+        raise ValueError(
+            f"no files matching {wanted} under {root}; it holds {len(every)} file(s) ({found}): "
+            f"--pattern '*{common}' takes the {common} ones"
+        )
     chosen = set(paths)
     others = [p for p in every if str(p) not in chosen]
     options = {}

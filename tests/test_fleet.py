@@ -299,7 +299,15 @@ def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nope")]) == 2
     assert "not a directory" in capsys.readouterr().err
     assert main(["batch", str(tmp_path), "--pattern", "*.xyz"]) == 2
-    assert "no files matching" in capsys.readouterr().err
+    assert "no files matching '*.xyz'" in capsys.readouterr().err
+    # a folder of Xsens MT Manager .txt exports (no log suffix): the refusal said only "set
+    # --pattern"; it now says what the folder holds and the pattern that takes its logs
+    for k in range(3):
+        (tmp_path / f"MT_{k}.txt").write_text("PacketCounter\tAcc_X\tAcc_Y\tAcc_Z\n")
+    (tmp_path / "NOTES.md").write_text("notes\n")
+    assert main(["batch", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "it holds 4 file(s) (3 .txt, 1 .md): --pattern '*.txt' takes the .txt ones" in err
 
 
 def test_dask_local_cluster_gives_the_same_results(fleet_dir, tmp_path, capsys):
