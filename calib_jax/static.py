@@ -26,11 +26,15 @@ pose found and with longer, quieter intervals; it rises when motion leaks into a
 residual), and splitting one pose in two adds intervals but no pose. A candidate needs at
 least 12 intervals and 12 distinct poses (9 parameters and some redundancy). Quiet stretches
 whose means lie far off the ellipsoid through the others (pauses inside a motion, where the
-hand's acceleration adds to gravity) are left out and reported. Ties (scores within their own
-scatter) go to the most poses held, the fewest split, and the median threshold factor (see
-``_choose``). When no candidate qualifies (six-face protocols, one long rest, tumbles), the
-classic setting is kept: a 1 s window (100 samples without a rate), factor 6, runs of at
-least one window.
+hand's acceleration adds to gravity) are left out and reported. A candidate whose means
+misfit their ellipsoid by ``LEAK_RATIO`` times the sweep's median or more took motion for
+poses (a six-face log whose slow turns a loose threshold counts) and is not scored. Ties
+(scores within their own scatter) go to the most poses held, the fewest split, and the median
+threshold factor (see ``_choose``). When no candidate qualifies (six-face protocols, one long
+rest, tumbles), the setting kept is one that found the pose count most settings found, near
+the classic factor 6, whose runs still hold those poses once refined (below); when no
+setting found two poses, the classic setting: a 1 s window (100 samples without a rate),
+factor 6, runs of at least one window.
 
 The moving variance of a short window hides a slow motion under the noise (two poses a few
 tens of degrees apart joined by a 2 s motion change the reading by less than the noise from one
@@ -231,9 +235,12 @@ class StaticReport:
     standard deviations off the ellipsoid through the others."""
     extra_notes: list[str] = field(default_factory=list)
     """Anything else the detector did that a report should say (interleaved empty rows)."""
-    n_leaky: int = 0
-    """Candidates not scored although they found enough poses: their means misfit their
-    ellipsoid by more than ``LEAK_RATIO`` times the sweep's median (motion taken for poses)."""
+
+    @property
+    def n_leaky(self) -> int:
+        """Candidates not scored although they found enough poses: their means misfit their
+        ellipsoid by ``LEAK_RATIO`` times the sweep's median or more (motion taken for poses)."""
+        return sum(c.motion for c in self.candidates)
 
     @property
     def n_intervals(self) -> int:
@@ -384,7 +391,6 @@ class StaticReport:
             "intervals": [[iv.start, iv.stop] for iv in self.intervals],
             "chosen": self.chosen,
             "rejected": [list(r) for r in self.rejected],
-            "n_leaky": self.n_leaky,
             "candidates": [c.to_dict() for c in self.candidates],
         }
 
@@ -1038,7 +1044,7 @@ def detect_static(
             settings.append((w, f, thr, noise))
             covered.append(int(np.sum(b - a)))
 
-    candidates, n_leaky = _without_leaks(candidates)
+    candidates = _without_leaks(candidates)
     best = _choose(candidates, covered)
     few = None  # nothing scorable, but settings found several poses: the count most settings
     # agree on (ties: the larger). Not the most any found: the loosest threshold lets a turn in
@@ -1124,24 +1130,21 @@ def detect_static(
         candidates=candidates,
         chosen=chosen,
         rejected=rejected,
-        n_leaky=n_leaky,
     )
 
 
-def _without_leaks(candidates: list[Candidate]) -> tuple[list[Candidate], int]:
-    """The candidates with those that took motion for poses made unscorable (score inf; see
-    :data:`LEAK_RATIO`), and how many they were."""
+def _without_leaks(candidates: list[Candidate]) -> list[Candidate]:
+    """The candidates, those that took motion for poses marked and made unscorable (score
+    inf; see :data:`LEAK_RATIO`)."""
     rms = np.array([c.rms for c in candidates], float)
     finite = np.isfinite(rms)
     if not finite.any():
-        return candidates, 0
+        return candidates
     limit = LEAK_RATIO * float(np.median(rms[finite]))
-    leaky = [np.isfinite(c.score) and c.rms > limit for c in candidates]
-    out = [
-        replace(c, score=float("inf"), motion=True) if bad else c
-        for c, bad in zip(candidates, leaky, strict=True)
+    return [
+        replace(c, score=float("inf"), motion=True) if np.isfinite(c.score) and c.rms > limit else c
+        for c in candidates
     ]
-    return out, int(sum(leaky))
 
 
 def _interleaved_gaps(valid: np.ndarray) -> bool:
