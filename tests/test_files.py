@@ -471,6 +471,26 @@ def test_xsens_rates_and_fusion_outputs(tmp_path):
     assert load_log(raw).sample_rate == 60.0
 
 
+def test_units_and_rate_stated_in_comment_lines_above_headerless_data(tmp_path):
+    """sensbiotk's FOX logs (GPL-3, not shipped) open with comment lines only: the column
+    names, then '# Units:' and one line per sensor ('#\tMagneto: gauss'). The names were read
+    but the units not (calib-jax mag said 'raw units' for a log in gauss), and a rate in a
+    comment line above data with no header row was never read: only lines above a header
+    were searched, and such a file has none."""
+    head = "# FOX Logger (IMU file)\n# id\tt\tax\tay\taz\tmx\tmy\tmz\tgx\tgy\tgz\n#\n"
+    head += "# Units:\n#\tTime: s\n#\tAcceleration: m.s^-2\n#\tMagneto: gauss\n"
+    head += "#\tGyrometer: rad/s\n#\n"
+    rows = "".join(
+        f"{i}\t{0.005 * i:.3f}\t0.1\t0.2\t-10.4\t-0.7\t0.2\t-0.8\t0.01\t0.02\t0.03\n"
+        for i in range(40)
+    )
+    log = load_log(_write(tmp_path, head + rows, "fox.csv"))
+    assert log.units == {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
+    assert log.sample_rate == pytest.approx(200.0)
+    rate = "# Sample rate: 50 Hz\n" + "".join(f"{i},9.8,0.1,0.2\n" for i in range(40))
+    assert load_log(_write(tmp_path, rate, "r.csv")).sample_rate == 50.0
+
+
 def test_vendor_exports_read_without_flags(tmp_path):
     """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
     MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and

@@ -170,7 +170,7 @@ def canonical_name(name: str) -> str | None:
 _SENSOR_WORDS = {
     **{w: "a" for w in ("acc", "accel", "accelerometer", "acceleration", "accelerations")},
     **{w: "g" for w in ("gyr", "gyro", "gyroscope", "gyrometer")},
-    **{w: "m" for w in ("mag", "magn", "magnetometer", "magnetic", "compass")},
+    **{w: "m" for w in ("mag", "magn", "magneto", "magnetometer", "magnetic", "compass")},
 }
 _UNIT_SENSOR = {
     **{u: "a" for u in ("m/s^2", "m/s2", "m/s²", "ms^-2", "m s^-2", "g")},
@@ -525,6 +525,17 @@ def _names_in_comment(line: str, delim: str | None, width: int) -> list[str] | N
     return names if len(names) == width and known >= 3 else None
 
 
+def _unit_in_comment(line: str) -> dict[str, str]:
+    """A sensor's unit stated alone in a comment line, by sensor prefix: '#\tMagneto: gauss'
+    (sensbiotk's FOX logs) gives {'m': 'gauss'}; anything else gives {}."""
+    m = re.fullmatch(r"([A-Za-z]+)\s*:\s*(\S+)", _comment_text(line))
+    if not m:
+        return {}
+    sensor = _SENSOR_WORDS.get(m.group(1).lower())
+    unit = _UNIT_LABELS.get(m.group(2).lower().replace(".", "/", 1).replace("/s^-2", "/s^2"))
+    return {sensor: unit} if sensor and unit and _UNIT_SENSOR.get(unit.lower()) == sensor else {}
+
+
 def _rate_in_comment(line: str) -> float | None:
     """A sample rate stated in a comment line ('// Sample rate: 50.0Hz', '# fs = 100'), alone
     or as one of its settings ('# Config: data_rate = 2000.0 Hz, filter = 488 Hz': PicoQuake)."""
@@ -603,6 +614,8 @@ class _Table:
     odd_header: list[str] | None = None
     layout: dict | None = None
     """How the rows sit in a plain text file on disk (see :func:`iter_rows`), else None."""
+    units: dict[str, str] = field(default_factory=dict)
+    """Units comment lines state per sensor ('# Magneto: gauss'), by sensor prefix a, g, m."""
 
 
 def _parse_rows(
@@ -939,11 +952,16 @@ def _read_text(
                 break
     preamble: dict[str, float] = {} if e4 is None else {"sample rate": e4[1]}
     ignored = []
-    for ln in lines[:stop]:
-        rate = _rate_in_comment(ln) if _skip(ln) else None
-        if rate is not None:
-            preamble["sample rate"] = rate
+    units: dict[str, str] = {}
+    for k, ln in enumerate(lines[:start]):  # comment lines anywhere above the data, and the
+        # preamble above the header (a file of comments then data has stop 0: sensbiotk's FOX)
         if _skip(ln):
+            rate = _rate_in_comment(ln)
+            if rate is not None:
+                preamble["sample rate"] = rate
+            units.update(_unit_in_comment(ln))
+            continue
+        if k >= stop:
             continue
         cells = [_strip_cell(c) for c in _cells(ln, delim)]
         cells = [c for c in cells if c] if delim is not None else cells
@@ -998,7 +1016,7 @@ def _read_text(
         ]
         data, more = _parse_rows(body[:max_rows], delim, width, dec, trailing, text_cols)
         bad += more
-    return _Table(header, data, bad, preamble, odd_header, layout)
+    return _Table(header, data, bad, preamble, odd_header, layout, units)
 
 
 def _loadtxt(
@@ -1652,6 +1670,8 @@ def _assemble(
         stated = {unit_in_name(names[source[p + a]]) for a in "xyz" if p + a in source}
         if len(stated) == 1 and None not in stated:
             units[sensor_name] = stated.pop()
+        elif stated == {None} and p in tab.units:  # names silent, a comment line states it
+            units[sensor_name] = tab.units[p]
     return SensorLog(
         acc=acc,
         gyro=gyro,
