@@ -491,6 +491,25 @@ def test_units_and_rate_stated_in_comment_lines_above_headerless_data(tmp_path):
     assert load_log(_write(tmp_path, rate, "r.csv")).sample_rate == 50.0
 
 
+def test_an_empty_last_column_is_a_column_not_a_trailing_separator(tmp_path):
+    """JustinPringle/TWLogger's logs (MIT): 21 names, and rows whose GPS fields are empty
+    unless the tag has a fix, so every row but a fix's ends in a comma. The comma was taken
+    for a trailing separator: 20 fields against 21 names, every command refused the file, the
+    fix's row was the one dropped, and the --columns example it offered read the date as t.
+    Also its first clock is text ('Time(hh:mm:ss)', NaN as numbers): the numeric one after it
+    ('Timestamp(Ms)') is now the time."""
+    head = "Date(MM/DD/YYYY),Time(hh:mm:ss),Timestamp(Ms),Temp(Raw),ACCELX,ACCELY,ACCELZ,"
+    head += "MAGX,MAGY,MAGZ,Sats,HDOP,Latitude,Longitude,FixAge,DateUTC,TimeUTC,DateAge,"
+    head += "Altitude,Course,Speed\n"
+    row = "07/11/2018,05:34:44,{t},0,1488.00,976.00,-4832.00,89.00,-10.00,-327.00"
+    rows = [row.format(t=15225 + 16 * i) + ",,,,,,,,,,," for i in range(40)]
+    rows[20] = row.format(t=15225 + 16 * 20) + ",7,1.2,-27.1,153.0,120,11072018,53444,5,12,0,0"
+    log = load_log(_write(tmp_path, head + "\n".join(rows) + "\n", "T1D0711-00.CSV"))
+    assert len(log.acc) == 40 and log.columns["ax"] == "ACCELX" and log.columns["mz"] == "MAGZ"
+    np.testing.assert_array_equal(log.mag[20], [89.0, -10.0, -327.0])
+    assert log.columns["t"] == "Timestamp(Ms)" and log.sample_rate == pytest.approx(62.5)
+
+
 def test_vendor_exports_read_without_flags(tmp_path):
     """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
     MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and
@@ -796,8 +815,9 @@ def test_any_file_loads_consistently_or_raises_valueerror(tmp_path, case):
     assert set(log.columns) <= set(F._CANON)
     assert log.sample_rate is None or (np.isfinite(log.sample_rate) and log.sample_rate > 0)
     used = np.column_stack(arrays)
-    if not np.isfinite(used).all():
-        assert any(s.startswith("cells that are not finite") for s in log.notes)
+    if not np.isfinite(used).all():  # every cell not read as a finite number is named
+        said = ("cells that are not finite", "cells beyond")
+        assert any(s.startswith(said) for s in log.notes), log.notes
 
 
 @settings(max_examples=60, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -857,6 +857,14 @@ def _read_text(
             ),
             None,
         )
+    if start is not None and trailing:
+        # every row ending in a separator may end in an empty last column instead: a header
+        # naming one field more than the rows keep, and not itself ending in the separator,
+        # says so (TWLogger's 21 names, the last GPS fields empty in every row but a fix's)
+        above = next((ln for ln in reversed(lines[:start]) if not _skip(ln)), None)
+        names = _cells(_line_end(above, delim), delim) if above is not None else []
+        if len(names) == width + 1 and _strip_cell(names[-1]) and not any(map(num, names)):
+            trailing, width = False, width + 1
     if start is None:
         first = next((ln.strip() for ln in lines if not _skip(ln)), "")
         raise ValueError(
@@ -1210,7 +1218,8 @@ def _steady_magnitude(v: np.ndarray) -> float | None:
     turns); None without 10 finite rows or with all of them zero. Read on at most about
     100,000 evenly spaced rows: a 3-hour 1 kHz log costs no more than a short one."""
     v = v[:: max(1, len(v) // 100_000)]
-    n = np.linalg.norm(v[np.all(np.isfinite(v), axis=1)], axis=1)
+    with np.errstate(over="ignore"):  # a corrupt 1e308 cell: its norm is inf, as it should be
+        n = np.linalg.norm(v[np.all(np.isfinite(v), axis=1)], axis=1)
     top = np.percentile(n, 95) if len(n) >= 10 else 0.0
     return float(np.median(n) / top) if top > 0 else None
 
@@ -1509,11 +1518,22 @@ def _assemble(
                     f"{path} has no header, so --columns cannot name columns ({src!r}); give "
                     f"them by position, e.g. --columns {_example(width)}"
                 )
+
+    def _numeric(j: int) -> bool:
+        return bool(np.isfinite(data[: min(len(data), 1000), j]).any())
+
     if header is not None:
         for j, h in enumerate(header):
             canon = canonical_name(h)
             if canon is not None and canon not in source:
                 source[canon] = j
+            elif canon == "t" and mapping is None and not _numeric(source["t"]) and _numeric(j):
+                # a clock of text ('Time(hh:mm:ss)', read as NaN) before one of numbers
+                # ('Timestamp(Ms)'): TWLogger's order
+                notes.append(
+                    f"column {header[source['t']]!r} reads as t but holds no numbers: {h!r} is used"
+                )
+                source["t"] = j
             elif canon is not None and mapping is None and source[canon] != j:
                 notes.append(f"column {h!r} also reads as {canon}; the first one is used")
         bare = {_clean(h): j for j, h in enumerate(header) if _clean(h) in ("x", "y", "z")}
