@@ -289,8 +289,13 @@ def _coverage(pts: np.ndarray, dirs: np.ndarray) -> tuple[float, np.ndarray, flo
     return flat, evecs[:, 0], float(np.min(dirs @ axis)), axis
 
 
+# fit points whose covariance's smallest / largest eigenvalue is below this lie in one plane
+# (the single fit and the batch, calib_jax.batch._checks)
+FLAT_POSES = 1e-3
+
+
 def _check_plane(flatness: float, normal: np.ndarray) -> None:
-    if flatness < 1e-3:
+    if flatness < FLAT_POSES:
         raise ValueError(
             f"all poses lie near one plane (normal {_vec(normal)} in the sensor frame); the "
             "gain and bias along that normal are unobservable. Add poses tilted out of the plane"

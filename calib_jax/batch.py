@@ -36,18 +36,19 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 
-from .accel import MODELS as ACCEL_MODELS
 from .accel import (
+    FLAT_POSES,
     _units_from_norm,
     detect_units,
     initial_guess_moments,
     no_accelerometer_unit,
 )
+from .accel import MODELS as ACCEL_MODELS
 from .calibration import BatchRecord
 from .geometry import moments, normalised_moments
 from .linalg import cholesky_small, eigh_small, inv3
 from .lm import checked_solver_options, lm_solve
-from .mag import ellipsoid_start_moments
+from .mag import FLAT_POINTS, ellipsoid_start_moments
 from .models.accel import alpha_matrix
 from .models.mag import (
     N_PARAMS,
@@ -60,7 +61,6 @@ from .models.mag import (
 from .status import Status, fit_status, is_converged, status_message
 
 MIN_SAMPLES = 20
-FLAT = 1e-3  # smallest / largest eigenvalue of the direction scatter: below is one plane
 # |g| in the physical units an accelerometer log comes in (counts: any output unit)
 G_IN_UNITS = {"g": 1.0, "m/s^2": 9.80665}
 
@@ -323,14 +323,17 @@ def _unit_sphere_moments(dtype) -> jax.Array:
     return moments(jnp.asarray(d, dtype), jnp.ones(len(d), dtype))
 
 
-def _checks(S, n_params, min_points=MIN_SAMPLES):
+def _checks(S, n_params, min_points, flat_below):
     """Status before fitting, from the moments alone: too few points (fewer than
     ``min_points``, or than the parameters: as many is an exact fit, as in the single fits),
-    or one plane."""
+    or one plane: the points' covariance (the second moments about their mean) has a smallest
+    to largest eigenvalue ratio below ``flat_below``, the single fit's own threshold
+    (:data:`calib_jax.accel.FLAT_POSES`, :data:`calib_jax.mag.FLAT_POINTS`: a compass turned
+    flat on a table, 0.002, was refused by calib-jax mag and calibrated by the batch at 1e-3)."""
     n = S[9, 9]
     scatter = S[6:9, 6:9] / jnp.maximum(n, 1.0)
     ev, _ = eigh_small(scatter)
-    flat = ev[0] <= FLAT * jnp.maximum(ev[2], 1e-300)
+    flat = ev[0] <= flat_below * jnp.maximum(ev[2], 1e-300)
     too_few = n < max(min_points, n_params)
     return jnp.where(
         too_few, int(Status.INSUFFICIENT_DATA), jnp.where(flat, int(Status.NO_COVERAGE), -1)
@@ -356,7 +359,7 @@ def _solve(theta_fn, p0, S, dof, solver, options):
 def _accel_one(S, mean, k, g, model, solver, options, min_points):
     free = np.asarray(ACCEL_MODELS[model])
     idx = np.flatnonzero(free)
-    pre = _checks(S, len(idx), min_points)
+    pre = _checks(S, len(idx), min_points, FLAT_POSES)
     S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = jnp.where(jnp.asarray(free), initial_guess_moments(S), 0.0)
     n = S[9, 9]
@@ -375,7 +378,7 @@ def _accel_one(S, mean, k, g, model, solver, options, min_points):
 
 
 def _mag_one(S, mean, k, field, model, solver, options, min_points):
-    pre = _checks(S, N_PARAMS[model], min_points)
+    pre = _checks(S, N_PARAMS[model], min_points, FLAT_POINTS)
     S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = ellipsoid_start_moments(S, model)
     n = S[9, 9]
