@@ -474,6 +474,14 @@ def run_batch(args: argparse.Namespace) -> int:
             f"note: {sum(readings.values())} file(s) have no header; their columns were read "
             f"as {how} (each file's notes say why; --columns says otherwise)"
         )
+    other = collections.Counter(
+        sensor
+        for r in table_rows
+        for sensor in ("mag", "accel")
+        if sensor != args.sensor and f"holds {sensor} columns only" in (r.get("message") or "")
+    )  # a folder of one sensor's logs batched as the other: say the option that takes them
+    for sensor, k in other.items():
+        print(f"note: {k} file(s) hold {sensor} columns only: --sensor {sensor} calibrates them")
     if args.table:
         from .display import fleet_rows, write_table
 

@@ -310,6 +310,25 @@ def test_batch_cli_bad_directory(tmp_path, capsys):
     assert "it holds 4 file(s) (3 .txt, 1 .md): --pattern '*.txt' takes the .txt ones" in err
 
 
+def test_batch_of_magnetometer_logs_names_the_option_that_takes_them(tmp_path, capsys):
+    """A folder of compass logs (bugplus/magnetic-tools, MIT: mag_x, mag_y, mag_z, pitch, roll)
+    batched with the default sensor: each file said 'map them with --columns if they are there
+    under other names', and nothing said --sensor mag."""
+    d = np.random.default_rng(0).normal(size=(200, 3))
+    for k in range(2):
+        np.savetxt(
+            tmp_path / f"calib_{k}_raw.csv",
+            185 * d,
+            delimiter=",",
+            header="mag_x,mag_y,mag_z",
+            comments="",
+        )
+    assert main(["batch", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "0 of 2 calibrated" in out
+    assert "note: 2 file(s) hold mag columns only: --sensor mag calibrates them" in out
+
+
 def test_dask_local_cluster_gives_the_same_results(fleet_dir, tmp_path, capsys):
     """A scheduler and two worker processes on the loopback, chunks of 3 files: the Python
     stream and ``calib-jax batch --dask ADDRESS`` give the in-process stream's results
