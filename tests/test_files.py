@@ -510,6 +510,27 @@ def test_an_empty_last_column_is_a_column_not_a_trailing_separator(tmp_path):
     assert log.columns["t"] == "Timestamp(Ms)" and log.sample_rate == pytest.approx(62.5)
 
 
+def test_the_columns_example_skips_constant_columns_and_prefers_sensor_names(tmp_path):
+    """PX4's vehicle_imu export (roboto-ai/robologs-px4-actions, MPL-2.0): no column is a raw
+    sensor axis, and the refusal's example mapped accel_device_id and gyro_device_id (constant
+    ids) onto the accelerometer. Constant columns are left out and names that hint at the
+    sensor come first."""
+    head = "timestamp,timestamp_sample,accel_device_id,gyro_device_id,delta_angle[0],"
+    head += "delta_angle[1],delta_angle[2],delta_velocity[0],delta_velocity[1],delta_velocity[2]\n"
+    rng = np.random.default_rng(0)
+    rows = "".join(
+        f"{1715966 + 4000 * i},{1715243 + 4000 * i},2490386,2490386,"
+        + ",".join(f"{v:.6g}" for v in rng.normal(size=6))
+        + "\n"
+        for i in range(40)
+    )
+    path = _write(tmp_path, head + rows, "vehicle_imu_0.csv")
+    with pytest.raises(ValueError, match="no sensor columns recognised") as err:
+        load_log(path)
+    example = str(err.value).split("e.g. --columns ")[1]
+    assert "device_id" not in example and "ax=delta_velocity[0]" in example, example
+
+
 def test_vendor_exports_read_without_flags(tmp_path):
     """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
     MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and

@@ -1847,6 +1847,13 @@ _DERIVED = re.compile(
 )
 
 
+_SENSOR_HINTS = {
+    "accel": ("acc", "vel", "lin"),
+    "gyro": ("gyr", "ang", "rot", "rate"),
+    "mag": ("mag", "comp", "field"),
+}
+
+
 def _named_example(header: list[str], data: np.ndarray, sensor: str | None) -> str:
     """A --columns example for a header whose names were not recognised: t for a time-like
     name (else the first column that only rises), the sensor's x, y, z for the first three
@@ -1858,6 +1865,11 @@ def _named_example(header: list[str], data: np.ndarray, sensor: str | None) -> s
     if t is None and rising:
         t = rising[0]
     free = [j for j in range(len(header)) if j != t and j not in rising]
+    # constant columns (device ids, flags) are no sensor axis; names that hint at the sensor
+    # come first (PX4's vehicle_imu: accel_device_id and gyro_device_id were offered as ax, ay)
+    free = [j for j in free if np.nanmax(data[:, j]) > np.nanmin(data[:, j])] or free
+    hint = _SENSOR_HINTS.get(sensor or "accel", ())
+    free.sort(key=lambda j: not any(h in str(header[j]).lower() for h in hint))
     pairs = [("t", t)] if t is not None else []
     pairs += [(_SENSORS.get(sensor, "a") + a, j) for a, j in zip("xyz", free, strict=False)]
     text = ",".join(f"{c}={header[j]}" for c, j in pairs)
