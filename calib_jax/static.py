@@ -280,7 +280,8 @@ class StaticReport:
         how = {
             "sweep": f"chosen by fit score from {len(self.candidates)} candidates"
             + (
-                f"; {self.n_leaky} not scored: their means misfit their ellipsoid "
+                f"; {self.n_leaky} not scored: {'its' if self.n_leaky == 1 else 'their'} means "
+                f"misfit {'its' if self.n_leaky == 1 else 'their'} ellipsoid "
                 f"{LEAK_RATIO:g}x or more the median (motion taken for poses)"
                 if self.n_leaky
                 else ""
