@@ -106,6 +106,7 @@ SCORE_TIE = 0.1
 # parts of the turns, at 8e-3 to 2e-2 (7-17x the median). Scorable candidates of 15 real logs
 # with genuine poses lie within 2.2x of their sweep's median (a hand-held MPU-9150 with pauses
 # the highest), of the hand-held x-io log that is never turned over, 60x
+# (benchmarks/detector_leaks.py)
 LEAK_RATIO = 4.0
 # consecutive interval means closer than this fraction of the radius (~6 degrees) are one pose
 # (split by a noise spike, or the settling just after the pose was taken): protocols move
