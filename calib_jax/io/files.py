@@ -1865,9 +1865,14 @@ def _named_example(header: list[str], data: np.ndarray, sensor: str | None) -> s
     if t is None and rising:
         t = rising[0]
     free = [j for j in range(len(header)) if j != t and j not in rising]
+
     # constant columns (device ids, flags) are no sensor axis; names that hint at the sensor
     # come first (PX4's vehicle_imu: accel_device_id and gyro_device_id were offered as ax, ay)
-    free = [j for j in free if np.nanmax(data[:, j]) > np.nanmin(data[:, j])] or free
+    def varies(j: int) -> bool:  # an all-NaN (text) column neither varies nor warns
+        col = data[:, j][np.isfinite(data[:, j])]
+        return bool(col.size and col.max() > col.min())
+
+    free = [j for j in free if varies(j)] or free
     hint = _SENSOR_HINTS.get(sensor or "accel", ())
     free.sort(key=lambda j: not any(h in str(header[j]).lower() for h in hint))
     pairs = [("t", t)] if t is not None else []
