@@ -341,6 +341,9 @@ def run_mag(args: argparse.Namespace) -> int:
     return 0 if cal.success else 1
 
 
+WARNED_SHOWN = 10  # calibrated files whose first warning batch prints; --json holds them all
+
+
 def run_batch(args: argparse.Namespace) -> int:
     _enable_x64()
     import json
@@ -432,6 +435,7 @@ def run_batch(args: argparse.Namespace) -> int:
 
     n_ok = n_all = n_poor = 0  # usable (as calib-jax accel/mag exit 0), of all, poorly determined
     not_ok: list[str] = []
+    warned: list[str] = []  # calibrated, with a warning (a calib-jax accel run prints it)
     table_rows: list[dict] = []
     try:
         if out:
@@ -450,6 +454,9 @@ def run_batch(args: argparse.Namespace) -> int:
             n_poor += r["status"] == "poorly_determined"
             if r["status"] != "ok":
                 not_ok.append(f"{r['path']}: {r['status']}: {r.get('message', '')}")
+            elif r.get("warnings"):
+                n_w = len(r["warnings"])
+                warned.append(f"{r['path']}: ok, {n_w} warning(s): {r['warnings'][0]}")
         if out:
             out.write("\n]}\n")
     finally:
@@ -458,6 +465,12 @@ def run_batch(args: argparse.Namespace) -> int:
     # after the progress line: why each file was not calibrated, without opening the JSON
     for line in not_ok:
         print(line)
+    for line in warned[:WARNED_SHOWN]:
+        print(line)
+    if len(warned) > WARNED_SHOWN:
+        print(
+            f"... and {len(warned) - WARNED_SHOWN} more calibrated with warnings (--json has them)"
+        )
     if not (args.json or args.table):  # nothing kept on disk: show the results themselves
         _print_batch_results(table_rows, args.sensor)
     poor = f" ({n_poor} poorly determined: usable with care, see why above)" if n_poor else ""

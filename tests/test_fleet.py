@@ -310,6 +310,26 @@ def test_batch_cli_bad_directory(tmp_path, capsys):
     assert "it holds 4 file(s) (3 .txt, 1 .md): --pattern '*.txt' takes the .txt ones" in err
 
 
+def test_batch_prints_the_warning_of_a_log_it_calibrated(tmp_path, capsys):
+    """A TWLogger tag (MIT) whose x axis was hardly tilted: calib-jax accel warns, and batch
+    printed only '1 of 1 calibrated' (the warning was in --json alone). Simulated here: 40
+    poses whose gravity has an RMS x component of about 0.17 g."""
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(40, 3))
+    d[:, 0] *= 0.15
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    log = simulate_accel(
+        random_params(1), d, samples_per_pose=300, transition_samples=20, noise=2e-3, rng=1
+    )
+    np.savetxt(
+        tmp_path / "tag.csv", np.column_stack([log.t, log.raw]), delimiter=",",
+        header="t,ax,ay,az", comments="",
+    )  # fmt: skip
+    assert main(["batch", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "tag.csv: ok, 1 warning(s): gravity hardly varies along [+1.00" in out, out
+
+
 def test_batch_of_magnetometer_logs_names_the_option_that_takes_them(tmp_path, capsys):
     """A folder of compass logs (bugplus/magnetic-tools, MIT: mag_x, mag_y, mag_z, pitch, roll)
     batched with the default sensor: each file said 'map them with --columns if they are there
