@@ -347,7 +347,6 @@ WARNED_SHOWN = 10  # calibrated files whose first warning batch prints; --json h
 def run_batch(args: argparse.Namespace) -> int:
     _enable_x64()
     import json
-    from collections import Counter
 
     from .fleet import calibrate_files, calibrate_files_dask
 
@@ -361,7 +360,7 @@ def run_batch(args: argparse.Namespace) -> int:
         paths = sorted(str(p) for p in root.rglob(args.pattern) if p.is_file())
     if not paths:
         wanted = repr(args.pattern) if args.pattern else "a log's name (" + _LOG_NAMES + ")"
-        suffixes = Counter(p.suffix.lower() for p in every if p.suffix)
+        suffixes = collections.Counter(p.suffix.lower() for p in every if p.suffix)
         if not every:
             raise ValueError(f"no files matching {wanted} under {root}: it is empty")
         if not suffixes:
