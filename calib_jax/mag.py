@@ -106,11 +106,15 @@ RUNAWAY = 10.0
 # plausibility of the RMS radial error after the fit (percent of the field), from real logs:
 # clean magnetometer tumbles reach 0.5-2 % (CK-Explorer 1.26 %, BROAD 1.5-1.9 %), the noisy
 # QMC5883L log 6.2 % (all of it sample-to-sample noise: 5.6 %), BROAD trial 34 with a magnet
-# attached for part of the log 7.6 % (sample-to-sample noise 0.4 %, ratio 19; clean logs 1-4).
-# Above RMS_PLAUSIBLE_PCT a residual that the sample-to-sample scatter does not explain
-# (more than NOISE_RATIO times it) means the data are not one ellipsoid: "poorly_determined".
+# attached for part of the log 7.6 % (sample-to-sample noise 0.4 %, ratio 19; clean logs 1-4,
+# all of them below RMS_PLAUSIBLE_PCT). Above RMS_PLAUSIBLE_PCT a residual that the
+# sample-to-sample scatter does not explain (more than NOISE_RATIO times it: three quarters of
+# its variance or more is slow structure) means the data are not one ellipsoid:
+# "poorly_determined". At 6 (the clean logs' ratios, which never reach this test) a FreeIMU
+# HMC5883L log whose hard iron moved during the recording (10.3 %, ratio 3.4) and a PX4 flight
+# whose |m| stepped (11.5 %, ratio 3.0) were "ok" without a word
 RMS_PLAUSIBLE_PCT = 5.0
-NOISE_RATIO = 6.0
+NOISE_RATIO = 2.0
 # above this no ellipsoid describes the data (a noise cloud 28-39 %, a hyperboloid 28-46 %,
 # a hard iron jumping by 2/3 of the field 15 %): "failed"
 RMS_NO_SHELL_PCT = 12.0
