@@ -486,14 +486,24 @@ def run_batch(args: argparse.Namespace) -> int:
             f"note: {sum(readings.values())} file(s) have no header; their columns were read "
             f"as {how} (each file's notes say why; --columns says otherwise)"
         )
+    said = {  # the loader's words for a file of the other sensor: its columns, or its name
+        "mag": ("holds mag columns only", "name names the magnetometer"),
+        "accel": ("holds accel columns only", "name names the accelerometer"),
+    }
     other = collections.Counter(
         sensor
         for r in table_rows
         for sensor in ("mag", "accel")
-        if sensor != args.sensor and f"holds {sensor} columns only" in (r.get("message") or "")
+        if sensor != args.sensor
+        and r["status"] == "not_fitted"
+        and any(w in (r.get("message") or "") for w in said[sensor])
     )  # a folder of one sensor's logs batched as the other: say the option that takes them
     for sensor, k in other.items():
-        print(f"note: {k} file(s) hold {sensor} columns only: --sensor {sensor} calibrates them")
+        kind = {"mag": "magnetometer", "accel": "accelerometer"}[sensor]
+        print(
+            f"note: {k} file(s) are {kind} logs (by their columns or their name): --sensor "
+            f"{sensor} calibrates them"
+        )
     if args.table:
         from .display import fleet_rows, write_table
 

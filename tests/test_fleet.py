@@ -346,7 +346,15 @@ def test_batch_of_magnetometer_logs_names_the_option_that_takes_them(tmp_path, c
     assert main(["batch", str(tmp_path)]) == 1
     out = capsys.readouterr().out
     assert "0 of 2 calibrated" in out
-    assert "note: 2 file(s) hold mag columns only: --sensor mag calibrates them" in out
+    note = "note: 2 file(s) are magnetometer logs (by their columns or their name): --sensor mag"
+    assert note in out, out
+    # a headerless 3-column file that its name calls the magnetometer (FreeIMU's magn.txt,
+    # MapleHan/freeimu_gui, GPL-3) is one too
+    for k in range(2):
+        (tmp_path / f"calib_{k}_raw.csv").unlink()
+    np.savetxt(tmp_path / "magn.txt", 185 * d, delimiter=" ")
+    assert main(["batch", str(tmp_path), "--pattern", "*.txt"]) == 1
+    assert "note: 1 file(s) are magnetometer logs" in capsys.readouterr().out
 
 
 def test_dask_local_cluster_gives_the_same_results(fleet_dir, tmp_path, capsys):
