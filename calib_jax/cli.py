@@ -633,8 +633,16 @@ def _split_columns(spec: str | None, prefix: str) -> tuple[dict | None, dict | N
 def _two_files(args: argparse.Namespace, second: str, sensor: str):
     """The accelerometer's log of ``args.file`` joined with ``sensor``'s own file ``second``
     (:func:`calib_jax.io.files.join_logs`: row by row, or by their time columns)."""
-    from .io.files import join_logs
+    from .io.files import join_logs, sensor_named_by
 
+    if sensor_named_by(args.file) == sensor and sensor_named_by(second) == "accel":
+        command = "marg" if sensor == "mag" else "gyro"
+        raise ValueError(
+            f"the two files are the other way round: {args.file}'s name names the "
+            f"{ {'mag': 'magnetometer', 'gyro': 'gyroscope'}[sensor] } and "
+            f"{second}'s the accelerometer, whose file comes first: calib-jax {command} "
+            f"{second} {args.file}"
+        )
     acc_columns, own = _split_columns(args.columns, sensor[0])
     log = load_input(  # None: its header or the guess (load_args would take --columns whole)
         args.file,

@@ -761,3 +761,18 @@ def test_max_iter_is_the_flag_the_not_converged_advice_names(tmp_path, capsys):
     assert "--max-iter sets the batch fit's budget for --sensor accel and mag" in (
         capsys.readouterr().err
     )
+
+
+def test_two_files_given_the_other_way_round_say_so(tmp_path, capsys):
+    """FreeIMU's capture (MapleHan/freeimu_gui, GPL-3) writes acc.txt and magn.txt, headerless.
+    `calib-jax marg magn.txt acc.txt` said 'For the accelerometer, give its own file' although
+    it was given, second; the refusal now says to swap them."""
+    d = np.random.default_rng(0).normal(size=(100, 3))
+    for name in ("acc.txt", "magn.txt", "gyro.txt"):
+        np.savetxt(tmp_path / name, d)
+    acc, mag, gyro = (str(tmp_path / n) for n in ("acc.txt", "magn.txt", "gyro.txt"))
+    assert main(["marg", mag, acc]) == 2
+    assert "the other way round" in capsys.readouterr().err
+    assert main(["gyro", gyro, acc]) == 2
+    err = capsys.readouterr().err
+    assert "names the gyroscope" in err and f"calib-jax gyro {acc} {gyro}" in err
