@@ -531,6 +531,21 @@ def test_the_columns_example_skips_constant_columns_and_prefers_sensor_names(tmp
     assert "device_id" not in example and "ax=delta_velocity[0]" in example, example
 
 
+def test_a_joined_file_keeps_how_it_was_read_and_its_unit(tmp_path):
+    """FreeIMU's capture (MapleHan/freeimu_gui, GPL-3) writes acc.txt and magn.txt, headerless:
+    `calib-jax marg acc.txt magn.txt` said how acc.txt was read and nothing of magn.txt, and a
+    unit the second file states was dropped."""
+    d = np.random.default_rng(0).normal(size=(50, 3))
+    np.savetxt(tmp_path / "acc.txt", d)
+    np.savetxt(tmp_path / "magn.txt", d, header="\tMagneto: gauss")
+    acc, mag = load_log(tmp_path / "acc.txt"), load_log(tmp_path / "magn.txt")
+    joined = F.join_logs(acc, mag, "mag")
+    assert any(
+        n.startswith("magn.txt: headerless 3-column file read as mx my mz") for n in joined.notes
+    )
+    assert joined.units.get("mag") == "gauss" and joined.mag is not None
+
+
 def test_vendor_exports_read_without_flags(tmp_path):
     """Three real layouts a new user's run met (scikit-kinematics' test data, BSD-3): an Xsens
     MT Manager export ('//' comment lines, one stating the rate, a tab-separated header, and

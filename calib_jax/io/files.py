@@ -1419,9 +1419,16 @@ def join_logs(log: SensorLog, other: SensorLog, sensor: str = "gyro") -> SensorL
     a, o = log.path or "the accelerometer's log", other.path or f"the {sensor}'s log"
     why = f"the fit needs the accelerometer and the {sensor} sample by sample on one clock"
     field_name = {"gyro": "gyro", "mag": "mag"}[sensor]
+    # how the other file was read, and the unit it states, go with its readings (the joined
+    # log said only how the accelerometer's file was read: FreeIMU's acc.txt + magn.txt)
+    name = Path(os.fsdecode(other.path)).name if other.path else o
+    carried = {
+        "notes": [*log.notes, *(f"{name}: {n}" for n in other.notes)],
+        "units": {**log.units, **{k: u for k, u in other.units.items() if k == sensor}},
+    }
     same_rows = len(log) == len(other)
     if same_rows and (log.t is None or other.t is None or np.allclose(log.t, other.t)):
-        return dataclasses.replace(log, **{field_name: other.vectors(sensor)})
+        return dataclasses.replace(log, **{field_name: other.vectors(sensor)}, **carried)
     if log.t is None or other.t is None:
         raise ValueError(f"{a} has {len(log)} rows and {o} {len(other)}: {why}")
     ta, to = np.asarray(log.t, float), np.asarray(other.t, float)
@@ -1451,9 +1458,8 @@ def join_logs(log: SensorLog, other: SensorLog, sensor: str = "gyro") -> SensorL
         + (f"; {int((~inside).sum())} accelerometer rows outside the {sensor}'s time span left "
            "out" if not inside.all() else "")
     )  # fmt: skip
-    return dataclasses.replace(
-        log, **keep, **{field_name: joined}, notes=[*log.notes, note], layout=None
-    )
+    carried["notes"].append(note)
+    return dataclasses.replace(log, **keep, **{field_name: joined}, **carried, layout=None)
 
 
 def _assemble(
