@@ -365,6 +365,14 @@ def _barely_turned(xv: np.ndarray, spread: float) -> bool:
     return spread <= BARELY_TURNED * noise
 
 
+def _relative(norms: np.ndarray, reference: float) -> np.ndarray:
+    """norms / reference - 1, in place (a 3-hour 1 kHz log: 86 MB an array): the relative
+    radial errors of calibrate_mag and judge_fit."""
+    norms /= reference
+    norms -= 1.0
+    return norms
+
+
 def _rms_pct(e: np.ndarray) -> float:
     """100 sqrt(mean(e^2)) of a relative error, without an e^2 temporary."""
     return float(100 * np.sqrt(np.dot(e, e) / len(e))) if len(e) else float("nan")
@@ -576,14 +584,10 @@ def calibrate_mag(
     # relative radial errors, each made in place from its norms (a 3-hour 1 kHz log: 86 MB
     # an array; the peak memory of `calib-jax mag` was here and in _plausibility)
     before = _norms(xn)  # |x - mean| / s: the scale cancels below, and no (N, 3) temporary
-    before /= before.mean()
-    before -= 1.0
+    before = _relative(before, before.mean())
     raw_err = _norms(xv)
-    raw_err /= raw_err.mean()
-    raw_err -= 1.0
-    after = ny
-    after /= radius
-    after -= 1.0
+    raw_err = _relative(raw_err, raw_err.mean())
+    after = _relative(ny, radius)
     rms_after = _rms_pct(after)
 
     if (
@@ -691,11 +695,8 @@ def judge_fit(
     warn: list[str] = []
     _, ny = _calibrated_coverage(x, centre, W, status, warn)
     before = _norms(x - x.mean(axis=0))
-    before /= before.mean()
-    before -= 1.0
-    after = ny
-    after /= radius
-    after -= 1.0
+    before = _relative(before, before.mean())
+    after = _relative(ny, radius)
     rms_after = _rms_pct(after)
     semi_axes, _ = ellipsoid_axes(W.T @ W / radius**2)
     status = _plausibility(
