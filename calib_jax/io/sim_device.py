@@ -217,12 +217,18 @@ def run_device(
         out = lines[int(rng.integers(0, n))][5:].encode() + eol
         return out + (head_line if header else b"")
 
-    pty = _Pty(link)
+    # the truth as set up is on disk before the link appears, so a board stopped any way at
+    # all (even killed) leaves its parameters; the counts are final when "complete" is true
+    # or the board was stopped by SIGTERM
+    _write_truth(truth_path, info)
 
     def on_term(signum, frame):  # noqa: ARG001
         raise SystemExit(0)
 
     old = signal.signal(signal.SIGTERM, on_term)
+    # a blocked SIGTERM inherited from the parent would leave the board deaf to its stop signal
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGTERM])
+    pty = _Pty(link)
     try:
         pty.write(connect_preamble())
         period = 1.0 / (rate * speed)
@@ -281,11 +287,16 @@ def run_device(
             pass
         if sent_file is not None:
             sent_file.close()
-        if truth_path is not None:
-            tmp = truth_path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(info, indent=1))
-            os.replace(tmp, truth_path)
+        _write_truth(truth_path, info)
     return info
+
+
+def _write_truth(path: Path | None, info: dict) -> None:
+    """Write ``info`` as JSON at ``path`` atomically (a reader never sees half a file)."""
+    if path is not None:
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(info, indent=1))
+        os.replace(tmp, path)
 
 
 def spawn(link: str | Path, truth: str | Path | None = None, **options) -> subprocess.Popen:
