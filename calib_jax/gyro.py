@@ -35,7 +35,7 @@ from .calibration import (
     _unsanitize,
     linear_forms,
 )
-from .io.files import SensorLog, as_log, join_logs
+from .io.files import UNEVEN_STEPS, SensorLog, as_log, join_logs, rate_from_steps
 from .lm import fit_status, lm_solve, status_message
 from .models.gyro import (
     Motions,
@@ -376,7 +376,17 @@ def _time_steps(t, sample_rate, n: int, notes: list[str]) -> tuple[np.ndarray, f
                 "gyro integration needs the time between samples (fix the column, or leave it "
                 "out and give the sample rate, --sample-rate)"
             )
-        return np.append(dt, 0.0), float(1.0 / np.median(dt))
+        rate = sample_rate or rate_from_steps(dt, [])
+        if rate and abs(rate * float(np.median(dt)) - 1.0) > UNEVEN_STEPS:
+            # stamps of delivery, not of sampling (a logger writing in bursts), or a rate the
+            # user gave against the column: each sample is one period of the rate
+            notes.append(
+                f"the time stamps step unevenly (median {1e3 * float(np.median(dt)):.3g} ms, "
+                f"mean {1e3 * float(np.mean(dt)):.3g} ms) against the sample rate "
+                f"{rate:.4g} Hz: the rates are integrated at one sample per 1/{rate:.4g} s"
+            )
+            return np.full(n, 1.0 / rate), float(rate)
+        return np.append(dt, 0.0), float(rate or 1.0 / np.median(dt))
     if sample_rate is None:
         raise ValueError(
             "the gyro fit integrates the rates over time, and the log has neither a time "

@@ -334,6 +334,27 @@ def test_repeated_time_stamps_are_spread_to_the_next(sim):
         calibrate_gyro(sim.acc, sim.gyro, t=t)
 
 
+def test_stamps_written_in_bursts_are_integrated_at_the_log_rate(sim):
+    """A logger that stamps samples when it delivers them, in bursts of 3-12 samples 2 ms
+    apart with gaps of 10-300 ms (sunsided's MPU6050 log: median step 2.2 ms, 99.3 Hz). The
+    stamps are not the sampling times: integrated step by step, the turns came out wrong, and
+    the rate was the median step's (457 Hz there). Integrated at the log's rate (the mean step,
+    100 Hz here), the fit recovers the truth within 4 standard errors, as the even clock does.
+    """
+    rng = np.random.default_rng(3)
+    n = len(sim.t)
+    starts = np.cumsum(rng.integers(3, 13, size=n))
+    starts = np.r_[0, starts[starts < n - 12]]  # the last burst as long as any
+    t = np.empty(n)
+    for a, z in zip(starts, np.r_[starts[1:], n], strict=True):
+        t[a:z] = sim.t[z - 1] + 0.002 * np.arange(z - a)  # delivered after the burst's last
+    cal = calibrate_gyro(sim.acc, sim.gyro, t=t)
+    assert cal.sample_rate == pytest.approx(100.0, rel=5e-3)
+    assert any("the time stamps step unevenly" in note for note in cal.notes)
+    assert np.abs((cal.matrix - sim.gyro_matrix) / cal.stderr_matrix).max() < 4.0
+    assert np.abs((cal.bias - sim.gyro_bias) / cal.stderr_bias).max() < 4.0
+
+
 def test_rows_without_readings_are_spanned_by_the_time_column(sim):
     # a sparse log (another sensor's rows interleaved, as the AirBrakes MicroStrain CSV): with
     # a time column the empty rows are gaps the steps span, and the fit equals the clean one

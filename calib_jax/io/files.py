@@ -1690,7 +1690,7 @@ def _assemble(
             dt = np.diff(t[np.isfinite(t)])
             dt = dt[np.isfinite(dt) & (dt > 0)]
             if dt.size:
-                rate = _rate_from_steps(dt, notes)
+                rate = rate_from_steps(dt, notes)
     units = {}
     for sensor_name, p in (("accel", "a"), ("gyro", "g"), ("mag", "m")):
         stated = {unit_in_name(names[source[p + a]]) for a in "xyz" if p + a in source}
@@ -1754,22 +1754,39 @@ def _one_instance(
     return data[keep]
 
 
-def _rate_from_steps(dt: np.ndarray, notes: list[str]) -> float | None:
+UNEVEN_STEPS = 0.25
+"""The mean time step (pauses left out) and the median differ by more than this fraction: the
+stamps are when a logger delivered the samples, in bursts, not when they were taken; the rate
+is the mean step's (:func:`rate_from_steps`), and the gyro integrates at that rate."""
+PAUSE_STEPS = 10.0
+"""A time step longer than this many times the 99th percentile of the steps is a pause (the
+logger stopped), not part of the sampling: :func:`rate_from_steps` leaves it out."""
+
+
+def rate_from_steps(dt: np.ndarray, notes: list[str]) -> float | None:
     """Samples per second from the time steps: the median step's rate, unless the steps are
     so uneven that it misleads (a logger writing in bursts: sunsided's MPU6050 log has a
-    median step of 2.1 ms and a mean of 10 ms, about 100 Hz): then the mean step's, leaving
-    out the 1 % longest (pauses), with a note."""
+    median step of 2.2 ms and a mean of 10.1 ms, 99.3 Hz). Then, with a note, the slope of
+    the stamps against the sample number, by least squares: a burst's stamps lie on both sides
+    of the sampling times, which the slope averages out, where the mean step (the end stamps
+    over the count) carries the end bursts' offsets (0.2 % on a 45 s simulated log). Pauses
+    are closed up first: steps over :data:`PAUSE_STEPS` times the 99th percentile (the 1 %
+    longest, left out before, were that log's longest burst gaps, not pauses: 107 Hz)."""
     r = float(1.0 / np.median(dt))
-    steady = dt[dt <= np.percentile(dt, 99)]
-    r_mean = float(1.0 / np.mean(steady)) if steady.size else r
-    if np.isfinite(r_mean) and r_mean > 0 and abs(r_mean / r - 1.0) > 0.25:
-        notes.append(
-            f"timestamps uneven (median step {1e3 / r:.3g} ms, mean {1e3 / r_mean:.3g} ms): "
-            f"sample rate taken as {r_mean:.4g} Hz from the mean step; give --sample-rate if "
-            "that is wrong"
-        )
-        r = r_mean
-    return r if np.isfinite(r) and r > 0 else None
+    pause = dt > PAUSE_STEPS * np.percentile(dt, 99)
+    if np.all(pause) or abs(float(np.median(dt) / np.mean(dt[~pause])) - 1.0) <= UNEVEN_STEPS:
+        return r if np.isfinite(r) and r > 0 else None
+    t = np.cumsum(np.where(pause, np.mean(dt[~pause]), dt))
+    i = np.arange(len(t)) - (len(t) - 1) / 2.0
+    r_fit = float(i @ i / (i @ (t - t.mean())))
+    if not (np.isfinite(r_fit) and r_fit > 0):
+        return r if np.isfinite(r) and r > 0 else None
+    notes.append(
+        f"timestamps uneven (median step {1e3 / r:.3g} ms, mean {1e3 / r_fit:.3g} ms): sample "
+        f"rate taken as {r_fit:.4g} Hz from the stamps' slope; give --sample-rate if that is "
+        "wrong"
+    )
+    return r_fit
 
 
 _TIME_UNITS = ((1.0, "s"), (1e-3, "ms"), (1e-6, "us"), (1e-9, "ns"))
