@@ -302,8 +302,7 @@ class MARGRecord(Record):
     def report(self) -> str:
         how = {
             "static": "paper 1's nine-parameter model on the static poses",
-            "ellipsoid": "its own ellipsoid (paper 2; the log has too few static poses for "
-            "paper 1)",
+            "ellipsoid": "its own ellipsoid (paper 2)",
             "none": "none (used as given)",
         }[self.accel_method]
         out = [f"accelerometer calibration: {how}"]
@@ -471,6 +470,14 @@ def calibrate_marg_log(
                     f"the {acal.n_intervals} quiet stretches it found leave {acal.rms_after:.2g} "
                     f"of g after the fit (over {REST_RMS_LIMIT:g}): they are not rests"
                 )
+            if accel == "auto" and acal.status != "ok":
+                # a tumble's quiet moments rarely hold the poses nine parameters need; the
+                # ellipsoid of every sample usually does (sunsided's MPU6050 hand tumble: gain
+                # x 0.94 +- 0.027 from 58 quiet stretches, 1.00 from the ellipsoid)
+                raise ValueError(
+                    f"its fit on {acal.n_intervals} quiet stretches is '{acal.status}'"
+                    + (f": {', '.join(acal.poorly_determined)}" if acal.poorly_determined else "")
+                )
         except ValueError as exc:
             if accel == "static":
                 raise
@@ -513,12 +520,44 @@ def calibrate_marg_log(
             f"the magnetometer's ellipsoid fit is '{mcal.status}': {why}; the alignment with "
             f"the accelerometer then fails too: {exc}"
         ) from exc
+    if acal is not None:
+        acal, method, al = _check_against_raw(acal, method, al, accel, log, mcal, warn)
     warn += [f"alignment: {w}" for w in al.warnings]
     gyro = _gyro_block(log, acal, method, warn)
     rec = _record(acal, method, mcal, al, warn, source=log.path)
     if gyro is None:
         return rec
     return dataclasses.replace(rec, gyro=gyro, status=worst_status(rec.status, gyro.status))
+
+
+SPREAD_WORSE = 1.2
+"""An accelerometer calibration that leaves the gravity-field angle spread more than this
+factor wider than the readings as given does not describe the log (:func:`_check_against_raw`).
+"""
+
+
+def _check_against_raw(acal, method, al, accel, log, mcal, warn):
+    """(acal, method, al) after the independent check of the accelerometer's calibration: the
+    gravity-field angle, which is constant, must spread no wider with it than with the
+    readings as given (after each one's own rotation fit). Wider by :data:`SPREAD_WORSE`: a
+    warning, and with ``accel="auto"`` the readings are used as given (sunsided's roll-and-tilt
+    log, whose quiet stretches are turns: 7.3 deg calibrated, 2.2 as given)."""
+    try:
+        raw = align_mag_to_accel(np.asarray(log.acc, float), mcal.apply(log.mag))
+    except ValueError:
+        return acal, method, al
+    if not al.spread_after_deg > SPREAD_WORSE * raw.spread_after_deg:
+        return acal, method, al
+    text = (
+        f"accelerometer: its {method} calibration leaves the gravity-field angle spread "
+        f"{al.spread_after_deg:.3g} deg, against {raw.spread_after_deg:.3g} deg with its "
+        "readings as given: it does not describe this log"
+    )
+    if accel != "auto":
+        warn.append(f"{text} (--accel none uses the readings as given)")
+        return acal, method, al
+    warn.append(f"{text}; the accelerometer is used as given")
+    return None, "none", raw
 
 
 def _gyro_block(log, acal, method: str, warn: list[str]) -> GyroCalibration | None:
