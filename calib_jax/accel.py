@@ -340,12 +340,15 @@ def check_poses(
     n_distinct = min(n_fitted, n_nominal)
     about = ""
     if n_fitted != n_nominal:  # say which count this is: the detector's counts are the other
+        centre = ", ".join(f"{v:.3g}" for v in nominal_centre)
         about = (
-            f", about the nominal centre ({', '.join(f'{v:.3g}' for v in nominal_centre)}); "
-            f"{n_fitted} about the sphere fitted through them"
+            f", about the nominal centre ({centre}); {n_fitted} about the sphere fitted "
+            "through them"
             if n_nominal < n_fitted
             else f", about the sphere fitted through them; {n_nominal} about the nominal centre"
         )
+        if n_nominal == 1 < n_fitted:  # a sphere through one pose's means centres anywhere
+            about = f", about the nominal centre ({centre}): the readings point one way"
     n_free = int(sum(MODELS[model]))
     if len(obs.means) >= n_free:  # enough poses, but coplanar: the sphere centre is arbitrary
         _check_plane(*_coverage(pts, np.ones((1, 3)))[:2])

@@ -409,6 +409,20 @@ def test_two_files_with_clocks_of_their_own_are_joined_by_time(sim, tmp_path):
                header="t,gx,gy,gz", comments="")  # fmt: skip
     with pytest.raises(ValueError, match="overlap in less than half"):
         calibrate_gyro(str(fa), str(short))
+    # a logger that writes rows twice (a phone's export, amirza495/KalmanFilter: 7 % of the
+    # rows after 30 s): the repeats are read once, and the fit is the one without them
+    rows = np.column_stack([sim.t, sim.acc])
+    twice = np.insert(rows, np.arange(1000, 2000, 14), rows[np.arange(1000, 2000, 14) - 1], 0)
+    np.savetxt(fa, twice, delimiter=",", header="t,ax,ay,az", comments="")
+    again = calibrate_gyro(str(fa), str(fg))
+    np.testing.assert_array_equal(again.matrix, cal.matrix)
+    assert any("Accelerometer.csv: 72 rows repeat the row before" in n for n in again.notes)
+    back = rows.copy()  # a step back that is no repeat: the file, the count and the row
+    back[[600, 601], 0] = back[[601, 600], 0]
+    np.savetxt(fa, back, delimiter=",", header="t,ax,ay,az", comments="")
+    with pytest.raises(ValueError, match=r"Accelerometer.csv: 1 of its time steps do not "
+                       r"increase \(the first after data row 601, t 6.01 s\)"):  # fmt: skip
+        calibrate_gyro(str(fa), str(fg))
 
 
 def test_clipped_rows_are_no_turn_about_one_axis():

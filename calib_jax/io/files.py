@@ -1431,19 +1431,24 @@ def join_logs(log: SensorLog, other: SensorLog, sensor: str = "gyro") -> SensorL
         return dataclasses.replace(log, **{field_name: other.vectors(sensor)}, **carried)
     if log.t is None or other.t is None:
         raise ValueError(f"{a} has {len(log)} rows and {o} {len(other)}: {why}")
+    log = _without_repeated_rows(log, a, carried["notes"])
+    other = _without_repeated_rows(other, o, carried["notes"])
     ta, to = np.asarray(log.t, float), np.asarray(other.t, float)
-    steps_ok = all(np.all(np.diff(t[np.isfinite(t)]) > 0) for t in (ta, to))
-    inside = (ta >= np.nanmin(to)) & (ta <= np.nanmax(to)) if steps_ok else ta < -np.inf
-    if not steps_ok or inside.sum() < 0.5 * len(ta):
+    for path, t in ((a, ta), (o, to)):
+        rows = np.flatnonzero(np.isfinite(t))
+        back = rows[np.flatnonzero(~(np.diff(t[rows]) > 0))]
+        if back.size:
+            raise ValueError(
+                f"{path}: {back.size} of its time steps do not increase (the first after data "
+                f"row {back[0] + 1}, t {t[back[0]]:.6g} s), so its readings cannot be put on the "
+                f"other file's times: {why}"
+            )
+    inside = (ta >= np.nanmin(to)) & (ta <= np.nanmax(to))
+    if inside.sum() < 0.5 * len(ta):
         raise ValueError(
             f"{a} ({len(log)} rows, t {np.nanmin(ta):.6g}-{np.nanmax(ta):.6g} s) and {o} "
-            f"({len(other)} rows, t {np.nanmin(to):.6g}-{np.nanmax(to):.6g} s) "
-            + (
-                "have time columns that do not both increase"
-                if not steps_ok
-                else "overlap in less than half of the accelerometer's time"
-            )
-            + f": {why}"
+            f"({len(other)} rows, t {np.nanmin(to):.6g}-{np.nanmax(to):.6g} s) overlap in less "
+            f"than half of the accelerometer's time: {why}"
         )
     v, ok = other.vectors(sensor), np.isfinite(to)
     joined = np.column_stack([np.interp(ta[inside], to[ok], v[ok, k]) for k in range(3)])
@@ -1460,6 +1465,25 @@ def join_logs(log: SensorLog, other: SensorLog, sensor: str = "gyro") -> SensorL
     )  # fmt: skip
     carried["notes"].append(note)
     return dataclasses.replace(log, **keep, **{field_name: joined}, **carried, layout=None)
+
+
+def _without_repeated_rows(log: SensorLog, name: str, notes: list[str]) -> SensorLog:
+    """``log`` without the rows that repeat the row before exactly, time and readings (a
+    logger that wrote a row twice: a phone's 100 Hz export repeats 7 % of its rows after
+    30 s), with a note in ``notes``; the log itself where there are none or no time column."""
+    if log.t is None:
+        return log
+    fields = [f for f in ("t", "acc", "gyro", "mag", "temp") if getattr(log, f) is not None]
+    table = np.column_stack([np.asarray(getattr(log, f), float) for f in fields])
+    repeat = np.r_[False, np.all(table[1:] == table[:-1], axis=1)]
+    if not repeat.any():
+        return log
+    notes.append(
+        f"{name}: {int(repeat.sum())} rows repeat the row before exactly (time and readings) "
+        "and were read once"
+    )
+    keep = {f: np.asarray(getattr(log, f))[~repeat] for f in fields}
+    return dataclasses.replace(log, **keep, layout=None)
 
 
 def _assemble(
