@@ -17,13 +17,12 @@ resolves. Nothing here imports JAX.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from .calibration import atomic_write
 from .export import G_STANDARD, Correction, corrections
 from .io.files import SensorLog, iter_rows, load_log
 
@@ -191,24 +190,18 @@ def _write(out, blocks, head: SensorLog, corr, streamed: bool) -> ApplyReport:
     use, plan_notes = _plan(corr, head)
     names: list[str] | None = None
     rows = skipped = 0
-    fd, tmp = tempfile.mkstemp(prefix=out.name + ".", suffix=".part", dir=out.parent)
-    try:
-        with os.fdopen(fd, "w", newline="\n") as fh:
-            for cols, bad in blocks:
-                skipped += bad
-                if names is None:
-                    names = list(cols)
-                    fh.write(",".join(names) + "\n")
-                n = len(cols[names[0]])
-                if n:
-                    fmt = ["%.17g" if c == "t" else "%.12g" for c in names]
-                    table = np.column_stack([cols[c] for c in names])
-                    np.savetxt(fh, table, fmt=fmt, delimiter=",")
-                    rows += n
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(out, suffix=".part", newline="\n") as fh:
+        for cols, bad in blocks:
+            skipped += bad
+            if names is None:
+                names = list(cols)
+                fh.write(",".join(names) + "\n")
+            n = len(cols[names[0]])
+            if n:
+                fmt = ["%.17g" if c == "t" else "%.12g" for c in names]
+                table = np.column_stack([cols[c] for c in names])
+                np.savetxt(fh, table, fmt=fmt, delimiter=",")
+                rows += n
     notes = list(head.notes) + plan_notes + [n for c in use.values() for n in c.notes]
     if skipped:
         notes.append(

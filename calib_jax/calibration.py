@@ -7,6 +7,7 @@ file applies to new raw data from the same sensor: a = alpha^-1 (a' - beta).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses as _dc
 import datetime as _dt
 import json
@@ -714,19 +715,21 @@ def _fields_equal(a, b):
     return all(_value_equal(getattr(a, f.name), getattr(b, f.name)) for f in _dc.fields(a))
 
 
-def write_json_atomic(path: str | Path, obj) -> None:
-    """Write ``obj`` as JSON to ``path`` atomically: a temporary file in the same folder,
-    fsynced, then ``os.replace``. On an error (a full disk: OSError ENOSPC) the temporary
-    file is removed and the error re-raised; ``path`` keeps its old content, or stays absent,
-    never a truncated file."""
+@contextlib.contextmanager
+def atomic_write(path: str | Path, suffix: str = ".tmp", newline: str | None = None):
+    """A text file to write that appears at ``path`` only when the block ends without an
+    error: a temporary file in the same folder, fsynced, then ``os.replace``. It gets the old
+    file's mode, else 0644 (mkstemp makes 0600: an applied log came out unreadable to the
+    user's group). On an error (a full disk: OSError ENOSPC) the temporary file is removed and
+    the error re-raised; ``path`` keeps its old content, or stays absent, never a truncated
+    file."""
     path = Path(path)
-    text = json.dumps(obj, indent=2) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
     try:
-        if hasattr(os, "fchmod"):  # mkstemp makes 0600; keep the old file's mode, else 0644
+        if hasattr(os, "fchmod"):
             os.fchmod(fd, path.stat().st_mode & 0o777 if path.exists() else 0o644)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+        with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as f:
+            yield f
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -736,6 +739,13 @@ def write_json_atomic(path: str | Path, obj) -> None:
         except OSError:
             pass
         raise
+
+
+def write_json_atomic(path: str | Path, obj) -> None:
+    """Write ``obj`` as JSON to ``path`` atomically (:func:`atomic_write`)."""
+    text = json.dumps(obj, indent=2) + "\n"
+    with atomic_write(path) as f:
+        f.write(text)
 
 
 def _check_version(d: dict, where: str = "") -> None:

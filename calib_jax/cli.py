@@ -690,9 +690,11 @@ def run_gyro(args: argparse.Namespace) -> int:
 
 def run_apply(args: argparse.Namespace) -> int:
     from .apply import apply_calibration
-    from .export import read
+    from .export import read, status_warnings
 
     corr = read(args.calibration, sensor=args.sensor)
+    for w in status_warnings(corr):
+        print(f"warning: {w}", file=sys.stderr)
     log = Path(args.file)
     if log.is_dir() or not log.exists():
         raise ValueError(f"{log} {'is a directory' if log.is_dir() else 'does not exist'}")
@@ -717,9 +719,10 @@ def run_apply(args: argparse.Namespace) -> int:
 def run_export(args: argparse.Namespace) -> int:
     from . import export
 
-    text = export.write(
-        export.read(args.calibration), args.format, sensor=args.sensor, name=args.name
-    )
+    corr = export.read(args.calibration)
+    text = export.write(corr, args.format, sensor=args.sensor, name=args.name)
+    for w in export.status_warnings(corr, args.sensor):
+        print(f"warning: {w}", file=sys.stderr)
     if args.out in (None, "-"):
         sys.stdout.write(text)
     else:

@@ -520,6 +520,18 @@ def save(cal, fmt: str, path: str | Path, **kw) -> Path:
 # readers
 
 
+def status_warnings(corr: dict[str, Correction], sensor: str | None = None) -> list[str]:
+    """A line for each correction (of ``sensor``, or all) whose fit was not 'ok': what
+    ``calib-jax apply`` and ``export`` say on stderr before using it (a poorly determined
+    matrix went into a C header with only a comment saying so)."""
+    return [
+        f"the {name} calibration's status is '{c.status}' (from {c.source or 'an unnamed log'})"
+        ": the data did not determine all of it; read its warnings before using it"
+        for name, c in corr.items()
+        if (sensor is None or name == sensor) and c.status not in (None, "ok")
+    ]
+
+
 def read(path: str | Path, sensor: str | None = None) -> dict[str, Correction]:
     """The corrections in a file: calib_jax's JSON (accel, ellipsoid, MARG), imucal's JSON,
     imu_calib's YAML or imu_tk's text, told apart by their content. ``sensor`` names the

@@ -239,6 +239,11 @@ def test_published_imucal_calibration_applied_to_its_session(tmp_path, capsys):
     assert main(["apply", str(cal), str(log), "--out", str(out2), "--chunk-rows", "700"]) == 0
     assert "streamed in chunks" in capsys.readouterr().out
     assert out.read_bytes() == out2.read_bytes()
+    # a new file is readable like any the user writes (it came out 0600, a temporary file's)
+    assert out.stat().st_mode & 0o777 == 0o644
+    out.chmod(0o664)  # an existing file keeps its mode
+    assert main(["apply", str(cal), str(log), "--out", str(out)]) == 0
+    assert out.stat().st_mode & 0o777 == 0o664
 
     d = json.loads(cal.read_text())
     raw = load_log(log)
@@ -311,6 +316,25 @@ def test_apply_and_export_cli_errors_name_the_cause(tmp_path, capsys):
         assert main(argv) == 2, argv
         assert says in capsys.readouterr().err, argv
     assert not (tmp_path / "mag.calibrated.csv").exists()
+
+
+def test_apply_and_export_warn_of_a_calibration_that_is_not_ok(tmp_path, capsys):
+    """A poorly determined calibration is still applied and exported (exit 0), with a warning
+    on stderr naming its status (a C header got only a comment); an 'ok' one gets none."""
+    import dataclasses
+
+    cal = tmp_path / "acc.json"
+    _accel_cal().save(cal)
+    out = tmp_path / "acc.h"
+    assert main(["export", str(cal), "--format", "c", "--out", str(out)]) == 0
+    assert "warning" not in capsys.readouterr().err
+    dataclasses.replace(_accel_cal(), status="poorly_determined").save(cal)
+    log = tmp_path / "log.csv"
+    log.write_text("ax,ay,az\n" + "\n".join("0.1,0.2,1.0" for _ in range(5)) + "\n")
+    for argv in (["export", str(cal), "--format", "c"], ["apply", str(cal), str(log)]):
+        assert main(argv) == 0, argv
+        said = capsys.readouterr().err
+        assert "warning: the accel calibration's status is 'poorly_determined'" in said, argv
 
 
 def _write_mag(tmp_path):
