@@ -150,7 +150,7 @@ def test_units_line_under_the_header(tmp_path):
     text = "Time,AccX,AccY,AccZ\ns,g,g,g\n" + _table(ROWS[:, :4])
     log = load_log(_write(tmp_path, text))
     np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
-    assert any("under the header" in n for n in log.notes)
+    assert any("other header line(s) skipped, with the names of line 1" in n for n in log.notes)
 
 
 def test_header_with_another_width_is_not_guessed_past(tmp_path):
@@ -1253,3 +1253,28 @@ def test_a_headerless_log_with_the_gyroscope_first_is_read_by_its_data(tmp_path,
         np.testing.assert_allclose(arr, ref, rtol=1e-15)
     note = next(n for n in log.notes if n.startswith("headerless"))
     assert "gx gy gz ax ay az mx my mz" in note and "gyroscope first" in note, note
+
+
+def test_a_header_naming_two_sensors_says_so_and_how_to_read_the_second(tmp_path):
+    """gaitmap's example (mad-lab-fau/gaitmap, MIT): a line 'sensor,left_sensor,...,
+    right_sensor,...' over 'axis,acc_x,...,gyr_z,acc_x,...,gyr_z', two foot IMUs. Six notes
+    said 'column acc_x also reads as ax' and the upper line was 'under the header'. One note
+    now names the repeated columns, and the --columns it offers reads the right foot."""
+    left, right = np.arange(60.0).reshape(10, 6), 100.0 + np.arange(60.0).reshape(10, 6)
+    names = ["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"]
+    text = (
+        "sensor," + ",".join(["left_sensor"] * 6 + ["right_sensor"] * 6) + "\n"
+        "axis," + ",".join(names * 2) + "\n"
+        + _table(np.column_stack([np.arange(10.0), left, right]))
+    )  # fmt: skip
+    p = _write(tmp_path, text)
+    log = load_log(p)
+    np.testing.assert_array_equal(log.acc, left[:, :3])
+    said = [n for n in log.notes if "twice" in n]
+    assert len(said) == 1 and "acc_x (columns 2 and 8)" in said[0], log.notes
+    assert any(n.startswith("other header line(s) skipped, with the names of line 2") for n in
+               log.notes)  # fmt: skip
+    columns = said[0].split("--columns ")[1].split()[0]
+    other = load_log(p, columns=columns)
+    np.testing.assert_array_equal(other.acc, right[:, :3])
+    np.testing.assert_array_equal(other.gyro, right[:, 3:])

@@ -936,7 +936,8 @@ def _read_text(
         others = [r for r in header_rows if r is not best]
         if others:
             notes.append(
-                "line(s) under the header skipped: " + "; ".join(",".join(r[1]) for r in others)
+                f"other header line(s) skipped, with the names of line {best[0] + 1} read: "
+                + "; ".join(",".join(r[1]) for r in others)
             )
         stop = min(r[0] for r in header_rows)
     if odd_header is not None and len(odd_header) > width:
@@ -1553,6 +1554,7 @@ def _assemble(
         return bool(np.isfinite(data[: min(len(data), 1000), j]).any())
 
     if header is not None:
+        again: dict[str, int] = {}  # a name read a second time: its first such column
         for j, h in enumerate(header):
             canon = canonical_name(h)
             if canon is not None and canon not in source:
@@ -1565,7 +1567,9 @@ def _assemble(
                 )
                 source["t"] = j
             elif canon is not None and mapping is None and source[canon] != j:
-                notes.append(f"column {h!r} also reads as {canon}; the first one is used")
+                again.setdefault(canon, j)
+        if again:
+            notes.append(_named_twice(header, source, again))
         bare = {_clean(h): j for j, h in enumerate(header) if _clean(h) in ("x", "y", "z")}
         if len(bare) == 3 and not any(k[0] in "agm" for k in source):
             # 'X,Y,Z' alone (Faros's ACC.csv): one sensor, read as a headerless file's would be
@@ -1866,6 +1870,24 @@ def _describe_columns(data: np.ndarray) -> str:
         rng = f"{c.min():.4g}..{c.max():.4g}"
         parts.append(f"{j + 1}: {rng}" + (" rising (time?)" if _rising(data[:, j]) else ""))
     return "columns " + ", ".join(parts)
+
+
+def _named_twice(header: list[str], source: dict[str, int], again: dict[str, int]) -> str:
+    """The note for sensor columns a header names twice (gaitmap's two foot IMUs, left_sensor
+    and right_sensor, both acc_x ... gyr_z): the first of each is read, and a positional
+    --columns reads the others."""
+    which = ", ".join(
+        f"{header[j]} (columns {source[c] + 1} and {j + 1})" for c, j in again.items()
+    )
+    pick = ["_"] * len(header)
+    if "t" in source and "t" not in again:
+        pick[source["t"]] = "t"
+    for canon, j in again.items():
+        pick[j] = canon
+    return (
+        f"the header names {which} twice: two sensors in one file? The first of each is read; "
+        f"--columns {','.join(pick)} reads the others"
+    )
 
 
 def _example(width: int, data: np.ndarray | None = None, sensor: str | None = None) -> str:
