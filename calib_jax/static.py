@@ -289,7 +289,7 @@ class StaticReport:
             ),
             "default": f"classic default: {none}",
             "given": "as given",
-            "most_poses": f"{none}; kept one that found the count most settings found",
+            "most_poses": f"{none}; kept a setting with the pose count most settings agree on",
         }[self.how]
         stride = f", on every {self.stride}th sample" if self.stride > 1 else ""
         return (
