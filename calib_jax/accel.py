@@ -50,6 +50,7 @@ from .observations import (
     TooFewPoses,
     accel_observations,
     detection_found,
+    most_poses_found,
 )
 from .padding import pad_rows
 from .runtime import disk_jit
@@ -361,10 +362,19 @@ def check_poses(
             f"least {n_free} poses spread over the sphere (paper 1 uses 48)",
             n_distinct,
             model,
-            samples_tried=obs.use == "samples" or obs.report.kind == "pose_table",
+            samples_tried=obs.use == "samples"
+            or obs.report.kind == "pose_table"
+            or _one_way(obs.report),
         )
 
     return c_s, r_s
+
+
+def _one_way(report) -> bool:
+    """Every detector setting tried found one pose at most: the readings point one way
+    throughout (a log of one face), and fitting its quasi-static samples is no advice to give
+    (AirbrakesV2's xplus.csv was told to try --use samples, which found one pose too)."""
+    return bool(report.candidates) and most_poses_found(report) <= 1
 
 
 def _holds_six_faces(pts: np.ndarray, centre: np.ndarray, within_deg: float = 30.0) -> bool:

@@ -411,6 +411,27 @@ def _check_not_flat(
     raise ValueError(_one_plane(normal, what))
 
 
+NORMALISED = 1e-4
+"""Samples whose lengths about zero agree within this (relative RMS) were normalised, or
+calibrated, before they were logged: no sensor's raw readings are that steady (a magnetometer's
+noise alone is 0.1 % or more)."""
+
+
+def _check_not_normalised(xv: np.ndarray) -> None:
+    """A ValueError for readings that are unit vectors or already calibrated: their lengths
+    are constant, so the fit returns the identity (cubesat-adcs' MPU9250 log, 1.000002 +-
+    2.9e-5: 'after 0.003 %' with W = I and no word of why)."""
+    n = _norms(xv[:: max(1, len(xv) // 100_000)])
+    med = float(np.median(n))
+    spread = float(np.sqrt(np.mean((n / med - 1.0) ** 2))) if med > 0 else np.inf
+    if spread < NORMALISED:
+        raise ValueError(
+            f"every sample's length is {med:.6g} within {spread:.1g} (relative RMS): the "
+            "readings were normalised (unit vectors) or calibrated before they were logged, so "
+            "they hold no offset or gain to find. Log the sensor's raw readings"
+        )
+
+
 def _one_plane(normal: np.ndarray, what: str = "field") -> str:
     return (
         f"the {what} directions lie in one plane (normal {_vec(normal)} in the sensor frame): "
@@ -542,6 +563,7 @@ def calibrate_mag(
     xn = xv - mean
     xn /= s  # in place: a 3-hour 1 kHz log's samples are 260 MB a copy
     _check_not_flat(xn, xv, mean, s, "gravity" if sensor == "accel" else "field")
+    _check_not_normalised(xv)
     opts = checked_solver_options(solver, solver_options)
     fits, chosen, selection = _fit_candidates(xn, model, solver, opts, warn)
     res, c_n, M_n = fits[chosen][:3]

@@ -231,11 +231,8 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
     if report.kind == "pose_table":
         return report.setting(sample_rate)
     tried = len(report.candidates)
-    # a setting whose means scatter off every ellipsoid found noise, not poses: its count of
-    # directions about the fitted centre means nothing (a board that never moved has dozens)
-    # (nor does one that took motion for poses: a six-face log counted its turns)
-    on_sphere = [c for c in report.candidates if not c.rms > SPHERE_RMS and not c.motion]
-    most = max((c.n_poses for c in on_sphere), default=0)
+    on_sphere = _on_sphere(report)
+    most = most_poses_found(report)
     setting = report.setting(sample_rate).removeprefix("static detection: ")
     found = f"found {report.n_intervals} static intervals with {setting}"
     if tried > 1:
@@ -249,6 +246,18 @@ def detection_found(report: StaticReport, sample_rate: float | None) -> str:
             "of its radius: the log looks like one pose held throughout, or motion throughout)"
         )
     return found
+
+
+def _on_sphere(report: StaticReport) -> list:
+    # a setting whose means scatter off every ellipsoid found noise, not poses: its count of
+    # directions about the fitted centre means nothing (a board that never moved has dozens)
+    # (nor does one that took motion for poses: a six-face log counted its turns)
+    return [c for c in report.candidates if not c.rms > SPHERE_RMS and not c.motion]
+
+
+def most_poses_found(report: StaticReport) -> int:
+    """The most distinct poses any detector setting found whose means lie on an ellipsoid."""
+    return max((c.n_poses for c in _on_sphere(report)), default=0)
 
 
 class TooFewPoses(ValueError):

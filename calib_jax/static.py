@@ -92,6 +92,11 @@ MIN_TRIM_S = 0.1
 MIN_RUN_S = 0.25
 # scoring
 MIN_POSES = 12
+FEWEST_POSES = 6
+"""The fewest distinct poses any accelerometer model fits (six faces, six parameters)."""
+PLATEAU = 0.1
+"""The share of the settings tried that must find a pose count for the most-poses fallback to
+prefer it to the commonest count when that one is too few to fit (:data:`FEWEST_POSES`)."""
 N_PARAMS = 9
 # means further than this many robust standard deviations off the fitted ellipsoid are pauses
 # inside a motion (gravity plus the hand's acceleration), not poses
@@ -1054,6 +1059,13 @@ def detect_static(
     counts = Counter(c.n_poses for c in candidates if c.n_poses >= 2)
     if best is None and not single and counts:
         most = max(counts, key=lambda k: (counts[k], k))
+        if most < FEWEST_POSES:  # refused whatever is fitted: a count that can be fitted, if
+            # a plateau of settings holds one (AirbrakesV2's six hand-held faces at 1 kHz: 44
+            # strict settings saw the 2 quietest, 21 looser ones all 6)
+            plateau = [
+                k for k, m in counts.items() if k >= FEWEST_POSES and m >= PLATEAU * len(candidates)
+            ]
+            most = max(plateau, default=most)
 
         def rank(i: int):
             c = candidates[i]

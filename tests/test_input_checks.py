@@ -560,3 +560,27 @@ def test_solver_options_are_checked_against_the_solver():
     with pytest.raises(ValueError, match=r"\['max_iters'\]"):
         cj.calibrate_accel_batch(log.acc[None], g=1.0, solver_options={"max_iters": 2})
     assert calibrate_accel(log, solver_options={"max_iter": 50}).success  # a real one works
+
+
+def test_normalised_readings_are_refused_not_fitted_to_the_identity():
+    """IvanVnucec/cubesat-adcs's magnetometer log (MIT) holds unit vectors, 1.000002 +- 2.9e-5:
+    calib-jax mag returned W = I, a centre of 1e-6 and 'after 0.003 %' without a word. Now a
+    ValueError says the readings were normalised; readings of a real ellipsoid pass."""
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(1500, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    with pytest.raises(ValueError, match=r"every sample's length is 1 within .*normalised"):
+        cj.calibrate_mag(u + 1e-6 * rng.normal(size=u.shape))
+    cal = cj.calibrate_mag(45.0 * u * [1.05, 0.97, 1.0] + [3.0, -2.0, 1.0] + 0.1 * rng.normal(
+        size=u.shape))  # fmt: skip
+    assert cal.status == "ok"
+
+
+def test_a_log_of_one_face_is_not_told_to_fit_its_samples():
+    """AirbrakesV2's xplus.csv, one face: every setting found one pose, and the refusal
+    advised '--use samples --window 10 --threshold-factor 20', which found one pose too."""
+    rng = np.random.default_rng(1)
+    x = np.array([0.02, -0.01, 1.01]) + 2e-3 * rng.normal(size=(3000, 3))
+    with pytest.raises(ValueError, match="only 1 distinct pose") as info:
+        calibrate_accel(x, sample_rate=100.0)
+    assert "--use samples" not in str(info.value) and "use='samples'" not in str(info.value)
