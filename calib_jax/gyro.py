@@ -742,6 +742,10 @@ def start_scale(motions: Motions, weights: jax.Array) -> jax.Array:
     return fine[jnp.nanargmin(_scan_costs(fine, motions, weights))]
 
 
+COUNT_SCALES = (1e-6, 1e-2)
+"""rad/s per count that a gyro's raw counts can have (an MPU-6050 at +-250 deg/s: 1.3e-4)."""
+
+
 def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
     """The input unit: declared (checked against the fitted scale) or recognised from it."""
     if units in UNIT_SCALES:
@@ -760,6 +764,13 @@ def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
     for u, f in UNIT_SCALES.items():
         if units == "auto" and 0.8 < scale / f < 1.25:
             return u, [f"gyro units: {u} (the fitted scale is {scale / f:.3f} x the {u} scale)"]
+    if not COUNT_SCALES[0] <= abs(scale) <= COUNT_SCALES[1]:
+        return "counts", [
+            f"gyro units: none fits: the rotations between poses need {scale:.4g} rad/s per "
+            "unit of the readings, which is neither rad/s nor deg/s nor a gyro's count "
+            f"({COUNT_SCALES[0]:g} to {COUNT_SCALES[1]:g} rad/s): the turns may not join the "
+            "poses (too small, or a pose missed); --gyro-units declares the unit"
+        ]
     return "counts", [f"gyro units: raw counts, {1 / scale:.5g} counts per rad/s"]
 
 

@@ -664,3 +664,16 @@ def test_a_gyro_axis_that_never_changes_is_refused():
     g[:, 1] = 0.0085
     with pytest.raises(ValueError, match=r"gyro's y reads 0.0085 in every sample.*--columns"):
         calibrate_gyro(sim.acc, g, t=sim.t)
+
+
+def test_a_scale_no_unit_or_count_explains_is_not_called_counts():
+    """AirbrakesV2's six one-face files joined (rad/s, turns of a few degrees in each file):
+    the fitted scale was 0.478 rad/s per unit and the note said 'raw counts, 2.0926 counts
+    per rad/s', a count of 27 deg/s. A scale outside 1e-6 to 1e-2 rad/s per count is said to
+    fit no unit; an MPU-6050's 1.33e-4 stays counts."""
+    from calib_jax.gyro import _resolve_units
+
+    unit, notes = _resolve_units("auto", 0.478)
+    assert unit == "counts" and notes[0].startswith("gyro units: none fits")
+    assert _resolve_units("auto", 1.33e-4)[1] == ["gyro units: raw counts, 7518.8 counts per rad/s"]
+    assert _resolve_units("auto", 0.0175)[0] == "deg/s"
