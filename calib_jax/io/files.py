@@ -1785,7 +1785,8 @@ def _one_instance(
 UNEVEN_STEPS = 0.25
 """The mean time step (pauses left out) and the median differ by more than this fraction: the
 stamps are when a logger delivered the samples, in bursts, not when they were taken; the rate
-is the mean step's (:func:`rate_from_steps`), and the gyro integrates at that rate."""
+is the stamps' slope against the sample number (:func:`rate_from_steps`), and the gyro
+integrates at that rate."""
 PAUSE_STEPS = 10.0
 """A time step longer than this many times the 99th percentile of the steps is a pause (the
 logger stopped), not part of the sampling: :func:`rate_from_steps` leaves it out."""
