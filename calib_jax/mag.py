@@ -618,7 +618,8 @@ def calibrate_mag(
         and np.linalg.norm(mean) > 3 * s  # about a field far from zero: one field held
         and _barely_turned(xv, s)
     ):
-        warn[:] = [w for w in warn if "ran away" not in w]
+        # nor a coverage: directions about a 'centre' that is the field say nothing
+        warn[:] = [w for w in warn if "ran away" not in w and "sphere of directions" not in w]
         warn.append(
             f"the field barely changes in the sensor frame: the samples spread by {s:.3g} "
             f"(RMS), within {BARELY_TURNED:g}x of their sample-to-sample noise, and "

@@ -150,7 +150,8 @@ def test_units_line_under_the_header(tmp_path):
     text = "Time,AccX,AccY,AccZ\ns,g,g,g\n" + _table(ROWS[:, :4])
     log = load_log(_write(tmp_path, text))
     np.testing.assert_array_equal(log.acc, ROWS[:, 1:4])
-    assert any("other header line(s) skipped, with the names of line 1" in n for n in log.notes)
+    said = "header line 1 read (Time,AccX,AccY,AccZ); line 2 skipped (s,g,g,g)"
+    assert any(said in n for n in log.notes), log.notes
 
 
 def test_header_with_another_width_is_not_guessed_past(tmp_path):
@@ -1272,8 +1273,8 @@ def test_a_header_naming_two_sensors_says_so_and_how_to_read_the_second(tmp_path
     np.testing.assert_array_equal(log.acc, left[:, :3])
     said = [n for n in log.notes if "twice" in n]
     assert len(said) == 1 and "acc_x (columns 2 and 8)" in said[0], log.notes
-    assert any(n.startswith("other header line(s) skipped, with the names of line 2") for n in
-               log.notes)  # fmt: skip
+    read = [n for n in log.notes if n.startswith("header line 2 read (axis,acc_x")]
+    assert len(read) == 1 and "line 1 skipped (sensor,left_sensor" in read[0], log.notes
     columns = said[0].split("--columns ")[1].split()[0]
     other = load_log(p, columns=columns)
     np.testing.assert_array_equal(other.acc, right[:, :3])

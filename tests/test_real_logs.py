@@ -237,3 +237,47 @@ def test_micropython_fusion_log_reads_as_is_and_its_pauses_are_not_rests():
     d = diagnose_accel(log)
     assert any("pauses in a motion" in n for n in d.notes)
     assert not any(n.startswith("at the noise floor") for n in d.notes)
+
+
+def test_repoimu_group_names_over_axis_letters_read_as_sensor_columns(capsys):
+    """repoIMU's trial as the ahrs package shipped it (tests/data/repoimu/NOTES.md): a line of
+    group names ('Time (s);Vicon Orientation;;;;IMU Acceleration;;;...') over one of axis
+    letters (';W;X;Y;Z;X;Y;Z;...'). Every command refused it and offered
+    --columns 'ax=IMU Acceleration,ay=Vicon Orientation,az=', which then failed. The two lines
+    now read as one header: the columns the file's own names give, in m/s^2 and rad/s."""
+    path = Path(__file__).parent / "data" / "repoimu" / "repoIMU_head.csv"
+    log = cj.load_log(path)
+    rows = np.loadtxt(path, delimiter=";", skiprows=2, usecols=range(14))
+    np.testing.assert_array_equal(log.t, rows[:, 0])
+    np.testing.assert_array_equal(log.acc, rows[:, 5:8])
+    np.testing.assert_array_equal(log.gyro, rows[:, 8:11])
+    np.testing.assert_array_equal(log.mag, rows[:, 11:14])
+    assert log.columns["ax"] == "IMU Acceleration X" and log.columns["mz"] == "IMU Magnetometer Z"
+    assert any(n.startswith("header lines 1-2 read together") for n in log.notes), log.notes
+    # the whole trial turns about x only; its first 3 s hold one pose: the refusal names poses
+    assert main(["accel", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "no sensor columns recognised" not in err and "pose" in err, err
+
+
+def test_ximu3_magnetometer_file_names_its_sensor_and_a_still_board_is_no_calibration(
+    tmp_path, capsys
+):
+    """x-IMU3's logger writes one file per sensor, Magnetometer.csv with 'X Axis (a.u.)'
+    columns (tests/data/ximu3_mag/NOTES.md). It was read as no sensor's columns, and
+    calib-jax diagnose and accel offered accelerometer columns. Now 'X Axis' names the x axis,
+    the file's name the magnetometer: calib-jax mag reads mx, my, mz; calib-jax accel refuses
+    with the file's own column names. The board lies still: the fit is 'failed' with the
+    reason, and no coverage of a sphere about a 'centre' that is the field itself."""
+    path = Path(__file__).parent / "data" / "ximu3_mag" / "Magnetometer.csv"
+    rows = np.loadtxt(path, delimiter=",", skiprows=1)
+    log = cj.load_log(path, sensor="mag")
+    np.testing.assert_array_equal(log.mag, rows[:, 1:])
+    out = tmp_path / "mag.json"
+    assert main(["mag", str(path), "--json", str(out)]) == 1
+    said = "".join(capsys.readouterr())
+    assert "the sensor was hardly turned" in said and "sphere of directions" not in said, said
+    assert json.loads(out.read_text())["status"] == "failed"
+    assert main(["accel", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "names the magnetometer" in err and "'ax=X Axis (a.u.)'" in err, err

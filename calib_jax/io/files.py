@@ -117,7 +117,9 @@ class OtherSensorsFile(ValueError):
     none: read, but not this sensor's (a batch entry ``not_fitted``, not ``load_error``)."""
 
 
-def _sensor_of_bare_columns(path, sensor: str | None, what: str) -> tuple[str | None, str]:
+def _sensor_of_bare_columns(
+    path, sensor: str | None, what: str, names: tuple[str, str, str] = ("x", "y", "z")
+) -> tuple[str | None, str]:
     """Which sensor columns that name none (``what``: 'columns x, y, z' or 'headerless 3
     columns') hold: the command's, else the one the file's name names; and why, for the note.
     A name that names another sensor than the command's is refused: a phone's Gyroscope.csv
@@ -140,8 +142,12 @@ def _sensor_of_bare_columns(path, sensor: str | None, what: str) -> tuple[str | 
         f"{want} this command reads. For the {want}, give its own file (a phone app writes one "
         "file per sensor: calib-jax marg Accelerometer.csv Magnetometer.csv, calib-jax gyro "
         f"Accelerometer.csv Gyroscope.csv); this file calibrates with {alone}; if it does hold "
-        f"the {want}, say so with --columns {p}x=x,{p}y=y,{p}z=z (by position for a headerless "
-        f"file: --columns {p}x,{p}y,{p}z)"
+        f"the {want}, say so with --columns "
+        + ",".join(
+            f"'{p}{a}={n}'" if " " in n else f"{p}{a}={n}"
+            for a, n in zip("xyz", names, strict=True)
+        )
+        + f" (by position for a headerless file: --columns {p}x,{p}y,{p}z)"
     )
 
 
@@ -210,6 +216,15 @@ def unit_in_name(name: str) -> str | None:
         return "m/s^2"
     last = re.split(r"[^a-z0-9]+", bare)[-1] if bare else ""
     return {"ga": "gauss", "rad": "rad/s", "ut": "uT"}.get(last) if "_" in bare else None
+
+
+def bare_axis(name: str) -> str | None:
+    """'x', 'y' or 'z' for a column name that names an axis and no sensor: 'X', 'x-axis',
+    x-IMU3's 'X Axis (a.u.)' (its Magnetometer.csv); None otherwise."""
+    words = re.findall(r"[a-z]+", re.sub(r"[\[\(].*?[\]\)]", " ", name.lower()))
+    if words[-1:] == ["axis"]:
+        words.pop()
+    return words[0] if len(words) == 1 and words[0] in ("x", "y", "z") else None
 
 
 def _name_by_words(name: str) -> str | None:
@@ -934,10 +949,17 @@ def _read_text(
         )
         header = best[1]
         others = [r for r in header_rows if r is not best]
+        joined = _group_and_axis(header_rows)
+        if joined is not None:
+            header, others = joined, []
+            notes.append(
+                f"header lines {header_rows[1][0] + 1}-{header_rows[0][0] + 1} read together, "
+                f"group names over axis names: {', '.join(n for n in joined if n)}"
+            )
         if others:
             notes.append(
-                f"other header line(s) skipped, with the names of line {best[0] + 1} read: "
-                + "; ".join(",".join(r[1]) for r in others)
+                f"header line {best[0] + 1} read ({','.join(best[1])[:80]}); "
+                + "; ".join(f"line {r[0] + 1} skipped ({','.join(r[1])[:80]})" for r in others)
             )
         stop = min(r[0] for r in header_rows)
     if odd_header is not None and len(odd_header) > width:
@@ -1048,6 +1070,28 @@ def _loadtxt(
         usecols=usecols,
         max_rows=max_rows,
     )
+
+
+def _group_and_axis(header_rows: list[tuple[int, list[str]]]) -> list[str] | None:
+    """One header from two lines, a group's name over the first of its columns and an axis
+    name under each (repoIMU's 'IMU Acceleration;;;' over 'X;Y;Z;'): the group name carried
+    right over the empty cells and joined to each axis ('IMU Acceleration X'). None unless the
+    joined names recognise more columns than either line alone. ``header_rows``: (line index,
+    names) walking up from the data, so the axis line comes first."""
+    if len(header_rows) < 2 or header_rows[1][0] != header_rows[0][0] - 1:
+        return None
+    axes, groups = header_rows[0][1], header_rows[1][1]
+    if all(g.strip() for g in groups):
+        return None
+    joined, group = [], ""
+    for g, a in zip(groups, axes, strict=True):
+        group = g.strip() or group
+        joined.append(f"{group} {a.strip()}".strip() if a.strip() else g.strip())
+
+    def known(names):
+        return sum(canonical_name(n) is not None for n in names if n)
+
+    return joined if known(joined) > max(known(axes), known(groups)) else None
 
 
 def _header_cells(line: str, delim: str | None) -> list[str]:
@@ -1570,10 +1614,13 @@ def _assemble(
                 again.setdefault(canon, j)
         if again:
             notes.append(_named_twice(header, source, again))
-        bare = {_clean(h): j for j, h in enumerate(header) if _clean(h) in ("x", "y", "z")}
+        bare = {a: j for j, h in enumerate(header) if (a := bare_axis(h)) is not None}
         if len(bare) == 3 and not any(k[0] in "agm" for k in source):
             # 'X,Y,Z' alone (Faros's ACC.csv): one sensor, read as a headerless file's would be
-            which, by_name = _sensor_of_bare_columns(path, sensor, "columns x, y, z")
+            names_xyz = tuple(header[bare[a]] for a in "xyz")
+            which, by_name = _sensor_of_bare_columns(
+                path, sensor, f"columns {', '.join(names_xyz)}", names_xyz
+            )
             cols, why = _guess(3, which)
             why = by_name or why
             source.update({c: bare[a] for c, a in zip(cols, "xyz", strict=True)})
