@@ -274,7 +274,7 @@ def _linear_forms(p: np.ndarray) -> dict:
 
 
 # Sensors per step of the moment pass, by JAX platform (0: all at once, one vmap).
-MOMENT_CHUNK = {"cpu": 8, "gpu": 4096}
+MOMENT_CHUNK = {"cpu": 8, "gpu": 1024}
 
 
 def _batch_moments(raw, valid, chunk: int | None = None):
@@ -286,9 +286,10 @@ def _batch_moments(raw, valid, chunk: int | None = None):
     :func:`calib_jax.geometry.sum_last`); chunks of 4, 8, 16 and 64 measured 0.017, 0.018,
     0.044 and 0.052 ms per sensor (benchmarks/moment_pass.py times the pass). A GPU runs each
     step as a few kernel launches, so it takes far larger chunks: on an H200 at 10,000
-    sensors, 8, 64, 512 and 4096 per step took 6.3, 0.86, 0.52 and 0.50 us per sensor (with
-    the earlier 35 separate sums; benchmarks/results/moment_pass_gpu.json,
-    ``moment_pass.py --chunks``).
+    sensors, with the variadic reduce, 256, 512, 1024 and 4096 per step took 0.45-0.47,
+    0.40-0.42, 0.34-0.35 and 0.47-0.48 us per sensor (two runs; with the earlier 35 separate
+    sums 8, 64, 512 and 4096 took 6.3, 0.86, 0.52 and 0.50; benchmarks/results/
+    moment_pass_gpu.json, ``moment_pass.py --chunks``).
     """
     if chunk is None:
         chunk = MOMENT_CHUNK.get(jax.default_backend(), MOMENT_CHUNK["gpu"])
