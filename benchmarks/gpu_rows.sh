@@ -24,7 +24,7 @@ python3 -c "import jax, optimistix, equinox; print('jax', jax.__version__, jax.d
 'optimistix', optimistix.__version__, 'equinox', equinox.__version__)"
 date
 timeout 120 python3 benchmarks/moment_pass.py --sensors 10000 --repeats 15 \
-    --chunks 8 64 512 4096 --out "$out"
+    --chunks 64 512 1024 4096 --out "$out"
 best=$(python3 -c "import json; print(json.load(open('$out/moment_pass_gpu.json'))['best_chunk'])" \
     2> /dev/null || echo 1024)
 date
