@@ -219,22 +219,56 @@ def _units_from_norm(norm: float) -> str | None:
     return next((u for u, (lo, hi) in UNIT_BANDS.items() if lo <= norm <= hi), None)
 
 
-def detect_units(static_norm: float, fit_norm: float | None = None) -> str | None:
+def detect_units(
+    static_norm: float, fit_norm: float | None = None, radius_determined: bool = False
+) -> str | None:
     """The accelerometer's unit from the median norm of its static readings, else from the
     radius of the sphere through them (a large bias moves the norm, not the radius): the one
-    rule of the single fit and the batch."""
+    rule of the single fit and the batch. ``radius_determined`` (:func:`radius_determined`):
+    the readings surround their fitted centre, so the radius is |g| in their unit whatever the
+    bias, and it alone decides: a magnetometer in gauss with a hard-iron offset of 0.77 had a
+    median norm of 0.89 'g' about zero and was calibrated with gains of 0.4, status ok."""
+    if radius_determined and fit_norm is not None:
+        return _units_from_norm(fit_norm)
     return _units_from_norm(static_norm) or (
         _units_from_norm(fit_norm) if fit_norm is not None else None
     )
 
 
+def radius_determined(points: np.ndarray, centre: np.ndarray) -> bool:
+    """Whether the points reach beyond a hemisphere about ``centre`` (the smallest cosine of
+    their directions to the mean direction is negative), so a sphere through them determines
+    its radius; poses seen from one side leave it to the bias and the gains."""
+    d = np.asarray(points, float) - centre
+    n = np.linalg.norm(d, axis=1)
+    if len(d) < 4 or not np.all(n > 0):
+        return False
+    d = d / n[:, None]
+    mean = d.mean(axis=0)
+    if np.linalg.norm(mean) == 0:
+        return True
+    return bool(np.min(d @ (mean / np.linalg.norm(mean))) < 0)
+
+
 def no_accelerometer_unit(
-    norm: float, fit_norm: float | None = None, units_option: bool = True
+    norm: float,
+    fit_norm: float | None = None,
+    units_option: bool = True,
+    radius_determined: bool = False,
 ) -> str:
     """Why a static norm fits no accelerometer unit, and what to do: the one message of the
     single fit, the batch, the recorder and (``units_option`` False: it has no --units) the
-    diagnosis."""
+    diagnosis. ``radius_determined``: the radius about the fitted centre decided (it is |g|
+    in the readings' unit), not the norm."""
     radius = f" (radius {fit_norm:.4g} about their fitted centre)" if fit_norm else ""
+    what = f"the static readings have median norm {norm:.4g}{radius}, which is"
+    if radius_determined and fit_norm is not None:
+        what = (
+            f"the static readings surround their fitted centre on a sphere of radius "
+            f"{fit_norm:.4g} (their median norm about zero is {norm:.4g}: an offset), and that "
+            "radius, gravity in their unit, is"
+        )
+        norm = fit_norm
     like = ""
     if 0.15 <= norm < 0.7:
         like = (
@@ -244,7 +278,7 @@ def no_accelerometer_unit(
     elif norm < 0.15:
         like = " A gyroscope at rest reads near zero: if this is one, run calib-jax gyro."
     return (
-        f"the static readings have median norm {norm:.4g}{radius}, which is no accelerometer "
+        f"{what} no accelerometer "
         f"reading in any unit considered ({_UNIT_RANGES}): gains would absorb the difference "
         f"and the calibration would look fine while being wrong.{like} If it is an "
         + (
@@ -527,7 +561,9 @@ def calibrate_accel(
     static_norm = obs.static_norm
 
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))
-    units = _resolve_units(units, report.n_intervals, static_norm, fit_norm)
+    units = _resolve_units(
+        units, report.n_intervals, static_norm, fit_norm, radius_determined(pts, c_s)
+    )
     g = _reference_magnitude(g, units, static_norm, output_units)
     out_units = accel_output_units(units, output_units)
 
@@ -631,13 +667,16 @@ def calibrate_accel(
     return cal
 
 
-def _resolve_units(units: str, n_intervals: int, static_norm: float, fit_norm: float) -> str:
+def _resolve_units(
+    units: str, n_intervals: int, static_norm: float, fit_norm: float, determined: bool = False
+) -> str:
     """The input unit: the one the static norm fits ("auto"), or the declared one checked
-    against it (counts have any scale); a ValueError saying which unit the data look like."""
-    detected = detect_units(static_norm, fit_norm)
+    against it (counts have any scale); a ValueError saying which unit the data look like.
+    ``determined``: the fitted radius decides (:func:`detect_units`)."""
+    detected = detect_units(static_norm, fit_norm, determined)
     if units == "auto":
         if detected is None:
-            raise ValueError(no_accelerometer_unit(static_norm, fit_norm))
+            raise ValueError(no_accelerometer_unit(static_norm, fit_norm, True, determined))
         return detected
     if detected != units and units != "counts":
         raise ValueError(

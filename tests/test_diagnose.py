@@ -233,6 +233,9 @@ def test_too_few_poses_is_its_own_verdict():
     _, d = run_accel((), poses=10)
     assert d.verdict == "not_possible"
     assert "10 static intervals for 9 parameters" in d.notes[0]
+    # what to record, and that calib-jax accel fits the log as it is (a new user's MPU-9150
+    # log of 22 poses was refused with the count alone)
+    assert "record 20 or more further poses" in d.notes[0] and "calib-jax accel" in d.notes[0]
     assert d.to_dict()["steps"] == []
 
 

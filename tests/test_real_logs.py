@@ -281,3 +281,23 @@ def test_ximu3_magnetometer_file_names_its_sensor_and_a_still_board_is_no_calibr
     assert main(["accel", str(path)]) == 2
     err = capsys.readouterr().err
     assert "names the magnetometer" in err and "'ax=X Axis (a.u.)'" in err, err
+
+
+def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(capsys):
+    """HamaguRe's magnetometer log in gauss (tests/data/hamagure_mag/NOTES.md, MIT): header
+    'x,y,z', a hard-iron offset of 0.77 G beside a field of 0.41 G. Its median norm about zero,
+    0.88, lies in the band an accelerometer in g reads, so calib-jax accel calibrated it with
+    gains of 0.39-0.44 and status ok, and calib-jax diagnose diagnosed it in mg. The readings
+    surround their fitted centre, so the radius (gravity in their unit) decides: 0.41 is no
+    accelerometer's, and both commands say it looks like a magnetometer in gauss. calib-jax mag
+    reads the same columns as a magnetometer: radius 0.41."""
+    path = Path(__file__).parent / "data" / "hamagure_mag" / "data-set_1.csv"
+    assert main(["accel", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "sphere of radius 0.41" in err and "magnetometer in gauss" in err, err
+    assert main(["diagnose", str(path)]) == 2
+    said = "".join(capsys.readouterr())
+    assert "sphere of radius 0.41" in said and "diagnose --sensor mag" in said, said
+    assert "it needs at least" not in said, said
+    mag = cj.calibrate_mag(cj.load_log(path, sensor="mag"))
+    assert mag.status == "ok" and abs(mag.radius - 0.41) < 0.01, (mag.status, mag.radius)

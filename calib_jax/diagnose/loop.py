@@ -1090,7 +1090,7 @@ def _not_possible(sensor, m, need, why, source) -> Diagnosis:
         noise_floor_allan=float("nan"),
         unexplained_structure=False,
         structure=[],
-        notes=[f"diagnosis not possible: {why}; it needs at least {need}"],
+        notes=[f"diagnosis not possible: {why}" + (f"; it needs at least {need}" if need else "")],
         rejected=[],
         rounds=[],
         groups={},
@@ -1167,17 +1167,18 @@ def diagnose_accel(
     else:
         # calibrate_accel's way in: the same screen, detector (a sweep scored by the fit, or
         # fixed blocks) and pose checks, so a log it refuses is not diagnosed either
-        from ..accel import check_poses, detect_units, no_accelerometer_unit
+        from ..accel import check_poses, detect_units, no_accelerometer_unit, radius_determined
 
+        need: str | None = "9 distinct static poses"
         try:
             found = accel_observations(
                 x, sample_rate=sample_rate, block=block or None, **static_options
             )
-            radius = check_poses(found, "accel9", sample_rate)[1]
-            if detect_units(found.static_norm, radius) is None:  # another sensor's log
-                raise ValueError(
-                    no_accelerometer_unit(found.static_norm, radius, units_option=False)
-                )
+            centre, radius = check_poses(found, "accel9", sample_rate)
+            around = radius_determined(found.points, centre)
+            if detect_units(found.static_norm, radius, around) is None:  # another sensor's log
+                need = None  # the message says what the readings are and what to run
+                raise ValueError(no_accelerometer_unit(found.static_norm, radius, False, around))
         except ValueError as exc:
             why = str(exc)
             if isinstance(exc, TooFewPoses):  # none of calib-jax accel's remedies apply here
@@ -1186,7 +1187,7 @@ def diagnose_accel(
                     if exc.n_distinct >= 6
                     else ""
                 )
-            d = _not_possible("accel", 0, "9 distinct static poses", why, source)
+            d = _not_possible("accel", 0, need, why, source)
             d.notes.extend(det_notes)
             return d
         spans = [(iv.start, iv.stop) for iv in found.report.intervals]
@@ -1198,7 +1199,9 @@ def diagnose_accel(
             m,
             f"{MIN_OBSERVATIONS} static intervals",
             f"{m} static intervals for 9 parameters: the split-half and leave-one-out tests "
-            "cannot run",
+            f"cannot run (record {MIN_OBSERVATIONS - m} or more further poses, each held still "
+            "for a second or more, in new orientations; calib-jax accel calibrates this log as "
+            "it is)",
             source,
         )
         d.notes.extend(det_notes)
