@@ -107,16 +107,19 @@ def check_reference_magnitude(g, units: str | None, norm: float) -> None:
             )
 
 
-def reference_for_log(norm: float, g=None, fit_norm: float | None = None) -> float:
+def reference_for_log(
+    norm: float, g=None, fit_norm: float | None = None, radius_determined: bool = False
+) -> float:
     """The accelerometer reference magnitude for one log from its static norm (and the radius
     of the sphere through its poses, ``fit_norm``): the given ``g`` (checked against the log's
     unit, :func:`check_reference_magnitude`), else the |g| of the unit the norms suggest (1
     for g and counts, 9.80665 for m/s^2; :func:`calib_jax.accel.detect_units`, as the single
-    fit decides), a ValueError when they suggest none."""
+    fit decides; ``radius_determined``: the radius decides), a ValueError when they suggest
+    none."""
     if g is None:
-        unit = detect_units(float(norm), fit_norm)
+        unit = detect_units(float(norm), fit_norm, radius_determined)
         if unit is None:
-            raise ValueError(no_accelerometer_unit(float(norm), fit_norm))
+            raise ValueError(no_accelerometer_unit(float(norm), fit_norm, True, radius_determined))
         return G_IN_UNITS.get(unit, 1.0)
     check_reference_magnitude(g, None, norm)
     return float(g)

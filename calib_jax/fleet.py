@@ -51,7 +51,7 @@ def prepare_log(
         valid, notes = screen_samples(x, "mag")
         info["notes"] = list(log.notes) + notes
         return x[valid], info
-    from .accel import MODELS, _coverage_warnings, check_poses, nominal_centre_of
+    from .accel import MODELS, _coverage_warnings, check_poses, nominal_centre_of, radius_determined
 
     obs = accel_observations(x, use=use, sample_rate=log.sample_rate, **detector)
     centre, radius = check_poses(obs, model or "accel9", log.sample_rate)
@@ -67,6 +67,7 @@ def prepare_log(
         use=use,
         static_norm=obs.static_norm,
         fit_norm=float(radius),
+        radius_determined=radius_determined(obs.points, centre),
     )
     return obs.points, info
 
@@ -96,11 +97,18 @@ def fit_prepared(
     for name, pts, info in prepared:
         if sensor == "accel":
             try:
-                g = reference_for_log(info["static_norm"], g_given, info.get("fit_norm"))
+                g = reference_for_log(
+                    info["static_norm"],
+                    g_given,
+                    info.get("fit_norm"),
+                    info.get("radius_determined", False),
+                )
             except ValueError as exc:  # read and prepared, but the reference does not fit
                 out.append({"path": str(name), "status": "not_fitted", "message": str(exc)})
                 continue
-            units = detect_units(info["static_norm"], info.get("fit_norm"))
+            units = detect_units(
+                info["static_norm"], info.get("fit_norm"), info.get("radius_determined", False)
+            )
             info = {**info, "units": units or "counts", "g": g}
             gs.append(g)
         fit.append((name, pts, info))

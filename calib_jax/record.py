@@ -665,7 +665,12 @@ def calibrate_devices(
                 continue
             if kind == "accel":
                 try:
-                    reference_for_log(info["static_norm"], g, info.get("fit_norm"))
+                    reference_for_log(
+                        info["static_norm"],
+                        g,
+                        info.get("fit_norm"),
+                        info.get("radius_determined", False),
+                    )
                 except ValueError as exc:
                     raise ValueError(f"{p}: {exc}") from None
             prepared.append((i, pts, info))

@@ -283,14 +283,15 @@ def test_ximu3_magnetometer_file_names_its_sensor_and_a_still_board_is_no_calibr
     assert "names the magnetometer" in err and "'ax=X Axis (a.u.)'" in err, err
 
 
-def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(capsys):
+def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(tmp_path, capsys):
     """HamaguRe's magnetometer log in gauss (tests/data/hamagure_mag/NOTES.md, MIT): header
     'x,y,z', a hard-iron offset of 0.77 G beside a field of 0.41 G. Its median norm about zero,
     0.88, lies in the band an accelerometer in g reads, so calib-jax accel calibrated it with
     gains of 0.39-0.44 and status ok, and calib-jax diagnose diagnosed it in mg. The readings
     surround their fitted centre, so the radius (gravity in their unit) decides: 0.41 is no
     accelerometer's, and both commands say it looks like a magnetometer in gauss. calib-jax mag
-    reads the same columns as a magnetometer: radius 0.41."""
+    reads the same columns as a magnetometer: radius 0.41. calib-jax batch (and record's
+    post-fit) take the same rule (fleet.prepare_log)."""
     path = Path(__file__).parent / "data" / "hamagure_mag" / "data-set_1.csv"
     assert main(["accel", str(path)]) == 2
     err = capsys.readouterr().err
@@ -299,5 +300,9 @@ def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(capsys):
     said = "".join(capsys.readouterr())
     assert "sphere of radius 0.41" in said and "diagnose --sensor mag" in said, said
     assert "it needs at least" not in said, said
+    (tmp_path / path.name).write_bytes(path.read_bytes())  # the batch: the same rule
+    assert main(["batch", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "not_fitted: the static readings surround their fitted centre" in out, out
     mag = cj.calibrate_mag(cj.load_log(path, sensor="mag"))
     assert mag.status == "ok" and abs(mag.radius - 0.41) < 0.01, (mag.status, mag.radius)
