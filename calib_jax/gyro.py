@@ -988,8 +988,8 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             f"{int(moving.sum())} of {len(iv)} static poses left out as rests: the gyro turned "
             f"or shook during them (a mean rate or a scatter more than {MOVING_REST:g}x the "
             "rests' typical scatter away from the others), motion the accelerometer did not "
-            "see: "
-            + ", ".join(f"[{s}, {e})" for s, e in iv[moving][:6])
+            "see: samples "
+            + ", ".join(f"[{s}, {e}) ({s / rate:.1f}-{e / rate:.1f} s)" for s, e in iv[moving][:6])
             + (", ..." if moving.sum() > 6 else "")
         )
         iv = iv[~moving]
