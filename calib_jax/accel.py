@@ -243,11 +243,7 @@ def radius_determined(points: np.ndarray, centre: np.ndarray) -> bool:
     n = np.linalg.norm(d, axis=1)
     if len(d) < 4 or not np.all(n > 0):
         return False
-    d = d / n[:, None]
-    mean = d.mean(axis=0)
-    if np.linalg.norm(mean) == 0:
-        return True
-    return bool(np.min(d @ (mean / np.linalg.norm(mean))) < 0)
+    return _coverage(np.asarray(points, float), d / n[:, None])[2] < 0
 
 
 def no_accelerometer_unit(

@@ -875,6 +875,7 @@ def regress_drivers(e, drivers, floor) -> list[dict]:
     out = []
     phi = lag1_correlation(e)
     e_w = _prewhiten(e, phi)
+    rss_plain = float(np.sum((e - e.mean()) ** 2))
     for name, D in drivers.items():
         A = np.column_stack([np.ones(m), D])
         p = A.shape[1] - 1
@@ -891,7 +892,6 @@ def regress_drivers(e, drivers, floor) -> list[dict]:
         pval = float(stats.f.sf(F, p, m - p - 1))
         size = float(np.sqrt(np.mean((fitted - e.mean()) ** 2)))
         significant = pval < STRUCTURE_P / len(drivers)
-        rss_plain = float(np.sum((e - e.mean()) ** 2))
         out.append(
             {
                 "driver": name,
