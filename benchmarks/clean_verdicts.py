@@ -22,45 +22,37 @@ import diagnosis_power as dp  # noqa: E402
 from calib_jax.diagnose import diagnose_marg  # noqa: E402
 
 part, seeds = sys.argv[2], int(sys.argv[3])
+
+
+def rates(diagnose, **row) -> None:
+    """Print ``row`` with the rates of 'unexplained structure' and of any accepted effect
+    over the seeds; ``diagnose(seed)`` gives one clean log's diagnosis."""
+    found = [diagnose(seed) for seed in range(seeds)]
+    unexplained = sum(d.verdict == "unexplained_structure" for d in found) / seeds
+    effects = sum(bool(d.effects) for d in found) / seeds
+    print(json.dumps(row | {"unexplained": unexplained, "effects": effects}), flush=True)
+
+
+def mag_log(noise, corr, model):
+    def diagnose(seed):
+        s, raw, _ = dp.simulate_sensor("mag", None, 0.0, noise, corr, seed, model)
+        return dp.diagnose_sensor("mag", None, s, raw, seed, model)
+
+    return diagnose
+
+
+def marg_log(noise, corr):
+    def diagnose(seed):
+        acc, mag = dp.simulate(seed, noise, corr)
+        return diagnose_marg(acc, mag, sample_rate=dp.RATE, seed=seed, progress=False)
+
+    return diagnose
+
+
 for noise in ("low", "high"):
     for corr in ("independent", "correlated"):
         if part == "mag":
             for model in ("full", "sphere"):
-                unexpl = eff = 0
-                for seed in range(seeds):
-                    s, raw, _ = dp.simulate_sensor("mag", None, 0.0, noise, corr, seed, model)
-                    d = dp.diagnose_sensor("mag", None, s, raw, seed, model)
-                    unexpl += d.verdict == "unexplained_structure"
-                    eff += bool(d.effects)
-                print(
-                    json.dumps(
-                        dict(
-                            part="mag",
-                            model=model,
-                            noise=noise,
-                            corr=corr,
-                            unexplained=unexpl / seeds,
-                            effects=eff / seeds,
-                        )
-                    ),
-                    flush=True,
-                )
+                rates(mag_log(noise, corr, model), part="mag", model=model, noise=noise, corr=corr)
         else:
-            unexpl = eff = 0
-            for seed in range(seeds):
-                acc, mag = dp.simulate(seed, noise, corr)
-                d = diagnose_marg(acc, mag, sample_rate=dp.RATE, seed=seed, progress=False)
-                unexpl += d.verdict == "unexplained_structure"
-                eff += bool(d.effects)
-            print(
-                json.dumps(
-                    dict(
-                        part="marg",
-                        noise=noise,
-                        corr=corr,
-                        unexplained=unexpl / seeds,
-                        effects=eff / seeds,
-                    )
-                ),
-                flush=True,
-            )
+            rates(marg_log(noise, corr), part="marg", noise=noise, corr=corr)
