@@ -93,3 +93,15 @@ def rest_floor(rest: np.ndarray, degree: int = 2) -> tuple[float, float]:
     phi = lag1_correlation(r)
     dof = n - float(np.trace(np.linalg.solve(X.T @ X, X.T @ _ar1_times(X, phi))))
     return float(np.sqrt(r @ r / max(dof, 1.0))), phi
+
+
+def correlated_rest_note(phi: float, n: int) -> str:
+    """What the rest's noise correlation means for its floor, or '' when it is short."""
+    length = 1.0 / max(1.0 - phi, 1e-3)
+    if length < 10 or n >= 20 * length:
+        return ""
+    return (
+        f"; its noise is correlated over about {length:.0f} samples (lag-1 {phi:.3f}), and a "
+        f"rest {n / length:.0f}x that long shows only part of noise that slow: the floor may be "
+        "low"
+    )

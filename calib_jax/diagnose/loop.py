@@ -60,7 +60,14 @@ from ..progress import finish, progress_bar
 from ..static import detect_rest, quarter_turn
 from ..status import status_message
 from . import model as M
-from .floors import allan_deviation, difference_noise, lag1_correlation, rest_floor, white_floor
+from .floors import (
+    allan_deviation,
+    correlated_rest_note,
+    difference_noise,
+    lag1_correlation,
+    rest_floor,
+    white_floor,
+)
 from .honest import HELD_OUT_GAIN, held_out_rms, judge
 
 BIC_MIN = 10.0  # "very strong" evidence on the Kass-Raftery scale
@@ -834,18 +841,6 @@ def driver_designs(u, tau, T, motion) -> dict[str, np.ndarray]:
     return drivers
 
 
-def _correlated_rest_note(phi: float, n: int) -> str:
-    """What the rest's noise correlation means for its floor, or '' when it is short."""
-    length = 1.0 / max(1.0 - phi, 1e-3)
-    if length < 10 or n >= 20 * length:
-        return ""
-    return (
-        f"; its noise is correlated over about {length:.0f} samples (lag-1 {phi:.3f}), and a "
-        f"rest {n / length:.0f}x that long shows only part of noise that slow: the floor may be "
-        "low"
-    )
-
-
 def _prewhiten(x: np.ndarray, phi: float) -> np.ndarray:
     """x_t - phi x_{t-1}, the first row scaled by sqrt(1 - phi^2) (Prais-Winsten): rows with
     independent errors when x's errors are AR(1) with coefficient phi; x itself for phi 0."""
@@ -1453,7 +1448,7 @@ def _mag_loop(
         allan = allan_deviation(rest, 1)
         obs.notes.append(
             f"floors from the longest rest, samples {iv.start}-{iv.stop} ({iv.n} samples)"
-            + _correlated_rest_note(phi, iv.n)
+            + correlated_rest_note(phi, iv.n)
         )
     else:
         white = difference_noise(nrm_all[ok])

@@ -49,7 +49,7 @@ from ..progress import finish, progress_bar
 from ..rotations import describe_permutation, rotvec_to_dcm
 from ..runtime import disk_jit
 from ..static import detect_rest
-from .floors import allan_deviation, rest_floor
+from .floors import allan_deviation, correlated_rest_note, difference_noise, rest_floor
 from .honest import HELD_OUT_GAIN, held_out_rms, judge
 from .loop import (
     BIC_MIN,
@@ -57,7 +57,6 @@ from .loop import (
     NULL_SIMS,
     Diagnosis,
     Observations,
-    _correlated_rest_note,
     _not_possible,
     _step,
     _summary,
@@ -271,10 +270,9 @@ def _angle_floors(Af, Afn, Mn, sample_rate) -> tuple[float, float, str]:
         iv = max(rep.intervals, key=lambda v: v.n)
         rest = _angles(Afn[iv.start : iv.stop], Mn[iv.start : iv.stop])
         white, phi = rest_floor(rest)
-        note = f"floors from the longest rest ({iv.n} samples)" + _correlated_rest_note(phi, iv.n)
+        note = f"floors from the longest rest ({iv.n} samples)" + correlated_rest_note(phi, iv.n)
         return white, allan_deviation(rest, 1), note
-    d = np.diff(_angles(Afn, Mn))
-    white = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2))
+    white = difference_noise(_angles(Afn, Mn))
     note = "no rest in the log: white floor from first differences, no Allan floor"
     return white, float("nan"), note
 

@@ -1617,14 +1617,12 @@ def _assemble(
         bare = {a: j for j, h in enumerate(header) if (a := bare_axis(h)) is not None}
         if len(bare) == 3 and not any(k[0] in "agm" for k in source):
             # 'X,Y,Z' alone (Faros's ACC.csv): one sensor, read as a headerless file's would be
-            names_xyz = tuple(header[bare[a]] for a in "xyz")
-            which, by_name = _sensor_of_bare_columns(
-                path, sensor, f"columns {', '.join(names_xyz)}", names_xyz
-            )
+            xyz = tuple(header[bare[a]] for a in "xyz")
+            names_xyz = ", ".join(xyz)
+            which, by_name = _sensor_of_bare_columns(path, sensor, f"columns {names_xyz}", xyz)
             cols, why = _guess(3, which)
             why = by_name or why
             source.update({c: bare[a] for c, a in zip(cols, "xyz", strict=True)})
-            names_xyz = ", ".join(header[bare[a]] for a in "xyz")
             notes.append(
                 f"columns {names_xyz} name no sensor: read as {' '.join(cols)} ({why}); pass "
                 "--columns to override"
