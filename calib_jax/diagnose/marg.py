@@ -145,12 +145,19 @@ HAND_CAUSE = (
     "it is a slowly changing offset of the accelerometer, which over {span} the "
     "driver tests cannot tell from a calibration error"
 )
-"""What the time driver's note adds as a cause. On simulated clean tumbles (30 s, the hand's
+"""What the time driver's note adds as a cause, where its size is at most
+:data:`HAND_MAX_RAD`. On simulated clean tumbles (30 s, the hand's
 0.02 g correlated over 1 s, benchmarks/diagnosis_power.py) the angle follows time at p 1e-5 to
 1e-13 in about half of the logs at low noise: the residual is the hand's slow acceleration
 seen along a turning direction, e_t = u_t . h_t, the very form of the time driver's vector
 columns (u_j x f(t)). No whitening of the angle's residual as a stationary series (AR(1),
 ARMA(1,1); branch try/arma11-whitening) separates the two; docs/close_the_loop.md, "Verdicts"."""
+
+HAND_MAX_RAD = 0.1
+"""The largest angle error (radians, 5.7 deg) :data:`HAND_CAUSE` is offered for: a hand turning
+a board slowly accelerates it by a few hundredths of g, 0.1 g at most (0.1 rad). On a real
+MPU-9150 log whose angle followed time by 43.8 deg (a magnetometer far off its sphere) the note
+named the hand, which cannot do that."""
 
 
 def _smooth_gravity(Afn: np.ndarray, tm: np.ndarray) -> np.ndarray:
@@ -461,8 +468,12 @@ def diagnose_marg(
                 f"{math.degrees(s_['size']):.3g} deg) and no catalogue effect explains it"
                 + (
                     " (an error in either sensor's calibration changes the angle with the "
-                    "board's whole orientation, which a tumble turns through in time; so does "
-                    f"{HAND_CAUSE.format(span=span)})"
+                    "board's whole orientation, which a tumble turns through in time"
+                    + (
+                        f"; so does {HAND_CAUSE.format(span=span)})"
+                        if s_["size"] <= HAND_MAX_RAD
+                        else ")"
+                    )
                     if s_["driver"] == "time"
                     else ""
                 )
