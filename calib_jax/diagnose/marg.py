@@ -160,6 +160,16 @@ MPU-9150 log whose angle followed time by 43.8 deg (a magnetometer far off its s
 named the hand, which cannot do that."""
 
 
+def _time_causes(size: float, span: str) -> str:
+    """The causes the note of an angle that follows time by ``size`` (radians) offers, over a
+    log of ``span``: a calibration error always, a hand's acceleration up to HAND_MAX_RAD."""
+    hand = f"; so does {HAND_CAUSE.format(span=span)}" if size <= HAND_MAX_RAD else ""
+    return (
+        " (an error in either sensor's calibration changes the angle with the board's whole "
+        f"orientation, which a tumble turns through in time{hand})"
+    )
+
+
 def _smooth_gravity(Afn: np.ndarray, tm: np.ndarray) -> np.ndarray:
     """The unit gravity direction smoothed over :data:`DRIVER_SMOOTHING_S` (``tm``: the
     samples' times, for the rate)."""
@@ -466,17 +476,7 @@ def diagnose_marg(
             notes.append(
                 f"the angle follows {s_['driver']} (p = {s_['p_value']:.1e}, size "
                 f"{math.degrees(s_['size']):.3g} deg) and no catalogue effect explains it"
-                + (
-                    " (an error in either sensor's calibration changes the angle with the "
-                    "board's whole orientation, which a tumble turns through in time"
-                    + (
-                        f"; so does {HAND_CAUSE.format(span=span)})"
-                        if s_["size"] <= HAND_MAX_RAD
-                        else ")"
-                    )
-                    if s_["driver"] == "time"
-                    else ""
-                )
+                + (_time_causes(s_["size"], span) if s_["driver"] == "time" else "")
             )
     excess = rms_after > 2 * floor or any(s_["above_floor"] for s_ in structure)
     if rms_after > 2 * floor:
