@@ -316,7 +316,7 @@ def markdown(rows, meta) -> str:
         "",
         *[
             f"- `{m['command']}`: {m['seeds']} seeds per row; {m['seconds']:.0f} s on "
-            f"{m['machine']} (load {m['load']})."
+            f"{m['machine']} (load {m['load']}); the rows of parts {', '.join(m['parts'])}."
             for m in meta["runs"]
         ],
         "",
@@ -479,7 +479,11 @@ def main() -> None:
         earlier = prev.get("runs") or [prev["meta"]]
         for m in earlier:
             m.setdefault("parts", m["command"].split("--parts ")[1].split())
-        runs = [m for m in earlier if not set(m["parts"]) & set(args.parts)] + runs
+        runs = [  # an earlier run stays listed for the parts whose rows are still its own
+            m | {"parts": [q for q in m["parts"] if q not in args.parts]}
+            for m in earlier
+            if set(m["parts"]) - set(args.parts)
+        ] + runs
     meta = {"runs": runs}
     (out / "diagnosis_power.json").write_text(json.dumps(meta | {"rows": rows}, indent=1))
     (out / "diagnosis_power.md").write_text(markdown(rows, meta))
