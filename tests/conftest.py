@@ -56,7 +56,8 @@ class Tol:
     N_SIGMA = 5.0
 
 
-_PEAK_MAPS = [0]  # the most maps any module left behind (reported at the end of the run)
+_PEAK = {"maps": 0, "rss_gb": 0.0, "clears": 0, "modules": 0}  # this process's, for the summary
+_RSS_BUDGET_GB = 4.0
 
 
 def _mapped_regions() -> int | None:
@@ -67,23 +68,56 @@ def _mapped_regions() -> int | None:
         return None
 
 
+def _map_limit() -> int | None:
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _rss_gb() -> float | None:
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+    return pages * os.sysconf("SC_PAGE_SIZE") / 1e9
+
+
 @pytest.fixture(scope="module", autouse=True)
 def _release_compiled_code():
-    """Free every compiled XLA executable after each test module.
+    """Free every compiled XLA executable after a test module once this process holds many.
 
     Each executable keeps about nine memory maps (its JIT-compiled code and data) for as long as
     a jit cache holds it, and module-level ``jax.jit`` objects hold theirs for the whole run.
     The full suite compiles thousands of functions: in one process it reached Linux's
     ``vm.max_map_count`` (65,530) and LLVM segfaulted inside a compile (CI exit 139, in
-    tests/test_pipeline.py). ``jax.clear_caches()`` drops them; a module's own shared compiles
-    (module-scoped fixtures, module-level jits) still serve all of its tests.
+    tests/test_pipeline.py). ``jax.clear_caches()`` drops them. It also drops what the next
+    modules would reuse (traced and lowered programs, the runtime's exported-program
+    wrappers), which they then rebuild: clearing after every module cost about a fifth of
+    the suite's compile work (issue 17). So the caches are cleared only when the process
+    holds a third of the map limit or 4 GB of memory, and always where neither can be read.
     """
     yield
-    n = _mapped_regions()
+    _PEAK["modules"] += 1
+    n, limit, rss = _mapped_regions(), _map_limit(), _rss_gb()
     if n is not None:
-        _PEAK_MAPS[0] = max(_PEAK_MAPS[0], n)
-    jax.clear_caches()
-    gc.collect()
+        _PEAK["maps"] = max(_PEAK["maps"], n)
+    if rss is not None:
+        _PEAK["rss_gb"] = max(_PEAK["rss_gb"], rss)
+    if n is None or limit is None or rss is None or n > limit // 3 or rss > _RSS_BUDGET_GB:
+        jax.clear_caches()
+        gc.collect()
+        _PEAK["clears"] += 1
+
+
+def pytest_sessionfinish(session):
+    """Each process (an xdist worker too) leaves its peaks in the run's cache folder."""
+    folder = os.environ.get("CALIB_JAX_CACHE_DIR")
+    if folder and _PEAK["modules"]:
+        line = " ".join(
+            f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in _PEAK.items()
+        )
+        Path(folder, f"peaks-{os.getpid()}.txt").write_text(line + "\n")
 
 
 def pytest_unconfigure(config):
@@ -92,15 +126,14 @@ def pytest_unconfigure(config):
 
 
 def pytest_terminal_summary(terminalreporter):
-    """The most memory maps one module left behind, against the limit that crashed CI."""
-    try:
-        limit = int(Path("/proc/sys/vm/max_map_count").read_text())
-    except (OSError, ValueError):
-        return
-    if _PEAK_MAPS[0]:
+    """Per process: the most memory maps and memory after a module, and how often the
+    compiled code was released (against the map limit that crashed CI)."""
+    folder = os.environ.get("CALIB_JAX_CACHE_DIR")
+    peaks = sorted(Path(folder).glob("peaks-*.txt")) if folder else []
+    if peaks:
         terminalreporter.write_line(
-            f"memory maps at the end of the busiest test module: {_PEAK_MAPS[0]} "
-            f"(vm.max_map_count {limit}; caches are cleared after every module)"
+            f"compiled-code release (vm.max_map_count {_map_limit()}): "
+            + "; ".join(p.read_text().strip() for p in peaks)
         )
 
 
