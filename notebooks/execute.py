@@ -24,9 +24,26 @@ def execute(path: Path) -> None:
         NotebookClient(
             nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": tmp}}
         ).execute()
+    _drop_font_warnings(nb)
     nbformat.validate(nb)
     nbformat.write(nb, path)
     print(f"{path.name}: executed in {time.perf_counter() - t0:.1f} s, written")
+
+
+def _drop_font_warnings(nb) -> None:
+    """Remove matplotlib's "findfont: ... not found" lines from stderr outputs: they say which
+    fonts this machine lacks, not what the notebook computed (21 of them on 2026-11-28)."""
+    for cell in nb.cells:
+        kept = []
+        for out in cell.get("outputs", []):
+            if out.output_type == "stream" and out.name == "stderr":
+                lines = [x for x in out.text.splitlines(True) if not x.startswith("findfont:")]
+                if not lines:
+                    continue
+                out.text = "".join(lines)
+            kept.append(out)
+        if cell.cell_type == "code":
+            cell.outputs = kept
 
 
 if __name__ == "__main__":
