@@ -62,7 +62,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from calib_jax.diagnose import diagnose_accel, diagnose_mag, diagnose_marg  # noqa: E402
-from calib_jax.diagnose.loop import BOUNDS  # noqa: E402
+from calib_jax.diagnose.loop import BOUNDS, coefficient_bound  # noqa: E402
 from calib_jax.rotations import describe_permutation, rotvec_to_dcm  # noqa: E402
 from calib_jax.simulate import (  # noqa: E402
     alpha_beta,
@@ -159,9 +159,7 @@ def beyond_bound(row) -> float | None:
         return None
     if not row["size"]:
         return None
-    bounds = BOUNDS[row["part"]]
-    lim = bounds["nonlinear"] if row["effect"] == "scale_nonlinearity" else bounds["effect"]
-    return row["size"] / lim
+    return row["size"] / coefficient_bound(row["effect"], BOUNDS[row["part"]])
 
 
 def diagnose_sensor(sensor, effect, s, raw, seed, model="full"):

@@ -499,12 +499,17 @@ def _coefficients(effect, theta, se, se_formal) -> dict:
     return out
 
 
+def coefficient_bound(effect: str, bounds: dict) -> float:
+    """The largest plausible |coefficient| of ``effect`` under a sensor's :data:`BOUNDS`."""
+    return bounds["nonlinear"] if effect == "scale_nonlinearity" else bounds["effect"]
+
+
 def _plausible(effect, theta_new, theta_cur, free_new, bounds: dict) -> tuple[bool, str]:
     special = ("soft_iron", "outliers")
     idx = _indices(_slots(effect, 2)) if effect not in special else np.array([], int)
     idx = idx[free_new[idx]] if idx.size else idx
     size = float(np.max(np.abs(theta_new[idx]))) if idx.size else 0.0
-    lim = bounds["nonlinear"] if effect == "scale_nonlinearity" else bounds["effect"]
+    lim = coefficient_bound(effect, bounds)
     db = float(np.max(np.abs(theta_new[6:9] - theta_cur[6:9])))
     dg = float(np.max(np.abs(theta_new[0:3] / theta_cur[0] - theta_cur[0:3] / theta_cur[0])))
     if effect == "soft_iron":
