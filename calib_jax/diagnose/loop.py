@@ -80,8 +80,7 @@ ellipsoid and a drift again: the halves' errors were 3-11x the whole log's (abou
 expected), and real drifts passing every other test (Hotelling p 1e-9..1e-16, held-out error
 28-70 % lower) were refused by the halves alone, in 5-20 % of simulated logs at any size
 (benchmarks/oracle_power.py: any good test finds them all). On the even and odd sixteenths
-the halves' errors are 2.3-3.3x and those logs pass."""
-"""Contiguous stretches of the log for the block jackknife. The MARG diagnosis uses
+the halves' errors are 2.3-3.3x and those logs pass. The MARG diagnosis uses
 :data:`calib_jax.align.JACKKNIFE_BLOCKS` (8) for at most 3 coefficients; an effect here has up
 to 6 (degree 2), and Hotelling's F(p, K - p) needs K well above p."""
 NULL_SIMS = 8  # beat all 8: a chance pass has probability 1/9 per candidate
@@ -692,7 +691,7 @@ def _run(
     order = np.argsort(obs.t, kind="stable")
     block = np.empty(m, int)
     block[order] = time_blocks(m, BLOCKS)  # contiguous stretches in time
-    first = block % 2 == 0  # the halves (HALVES)
+    first = block % 2 == 0  # the halves (BLOCKS)
     jack_cur = None  # the current model's leave-one-block-out fits, once computed
 
     bar = progress_bar(MAX_ROUNDS, progress, f"diagnosing {obs.sensor}", unit="round")
