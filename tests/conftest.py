@@ -57,6 +57,10 @@ class Tol:
 
 
 _PEAK = {"maps": 0, "rss_gb": 0.0, "clears": 0, "modules": 0}  # this process's, for the summary
+_PEAKS_ENV = "CALIB_JAX_TEST_PEAKS"  # a folder the run's processes leave their _PEAK in
+_OWN_PEAKS = None
+if _PEAKS_ENV not in os.environ:  # the first process (the xdist controller); workers inherit
+    _OWN_PEAKS = os.environ[_PEAKS_ENV] = tempfile.mkdtemp(prefix="calib_jax_peaks_")
 _RSS_BUDGET_GB = 4.0
 
 
@@ -93,9 +97,10 @@ def _release_compiled_code():
     ``vm.max_map_count`` (65,530) and LLVM segfaulted inside a compile (CI exit 139, in
     tests/test_pipeline.py). ``jax.clear_caches()`` drops them. It also drops what the next
     modules would reuse (traced and lowered programs, the runtime's exported-program
-    wrappers), which they then rebuild: clearing after every module cost about a fifth of
-    the suite's compile work (issue 17). So the caches are cleared only when the process
-    holds a third of the map limit or 4 GB of memory, and always where neither can be read.
+    wrappers), which they then rebuild (issue 17's profile of the suite, clearing after every
+    module: tracing 201 s, lowering 152 s, the wrappers 170 s in 367 compiles). So the caches
+    are cleared only when the process holds a third of the map limit or 4 GB of memory, and
+    always where neither can be read.
     """
     yield
     _PEAK["modules"] += 1
@@ -111,8 +116,8 @@ def _release_compiled_code():
 
 
 def pytest_sessionfinish(session):
-    """Each process (an xdist worker too) leaves its peaks in the run's cache folder."""
-    folder = os.environ.get("CALIB_JAX_CACHE_DIR")
+    """Each process (an xdist worker too) leaves its peaks in the run's folder for them."""
+    folder = os.environ.get(_PEAKS_ENV)
     if folder and _PEAK["modules"]:
         line = " ".join(
             f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in _PEAK.items()
@@ -121,14 +126,15 @@ def pytest_sessionfinish(session):
 
 
 def pytest_unconfigure(config):
-    if _OWN_CACHE is not None:
-        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
+    for own in (_OWN_CACHE, _OWN_PEAKS):
+        if own is not None:
+            shutil.rmtree(own, ignore_errors=True)
 
 
 def pytest_terminal_summary(terminalreporter):
     """Per process: the most memory maps and memory after a module, and how often the
     compiled code was released (against the map limit that crashed CI)."""
-    folder = os.environ.get("CALIB_JAX_CACHE_DIR")
+    folder = os.environ.get(_PEAKS_ENV)
     peaks = sorted(Path(folder).glob("peaks-*.txt")) if folder else []
     if peaks:
         terminalreporter.write_line(
