@@ -93,6 +93,7 @@ MAG_EFFECTS = {"hard_iron_drift": "full", "soft_iron": "sphere"}  # effect: decl
 MULTIPLES = {"accel": (0.5, 1.0, 3.0, 10.0, 20.0), "mag": (1.0, 3.0, 10.0)}
 SENSOR_NOISE = {"accel": {"low": 2e-3, "high": 6e-3}, "mag": {"low": 5e-3, "high": 1.5e-2}}
 MAG_SAMPLES, MAG_REST, MAG_RATE = 2000, 500, 50.0
+SOFT_IRON_GAINS = np.array([3.0, -2.0, 1.0])  # a spherical board's gains: 1 + size * these
 
 
 def simulate_sensor(sensor, effect, size, noise, corr, seed, model="full"):
@@ -133,7 +134,7 @@ def _noise_free(sensor, effect, size, seed, model):
     if sphere:  # the board's ellipsoid replaced by a sphere (+ the soft iron asked for)
         alpha, b = alpha_beta(s.params)
         v = (raw - b) @ np.linalg.inv(alpha).T
-        gains = 1.0 + (size * np.array([3.0, -2.0, 1.0]) if effect else 0.0)
+        gains = 1.0 + (size * SOFT_IRON_GAINS if effect else 0.0)
         raw = v * gains + b
     return s, raw
 

@@ -52,7 +52,8 @@ def _sym(q6: np.ndarray) -> np.ndarray:
 
 def _design(effect, size, seed):
     """(residual(theta_base, beta) over the samples, theta_base at the truth, beta, the
-    noise-free readings) of one simulated log (:func:`diagnosis_power.simulate_sensor`'s)."""
+    noise-free readings less the true centre, the true shape Q) of one simulated log
+    (:func:`diagnosis_power.simulate_sensor`'s): r = sqrt(z' Q z) - 1 at the truth."""
     model = P.MAG_EFFECTS[effect]
     s, clean = P._noise_free("mag", effect, size, seed, model)
     tau = (s.t - s.t.min()) / np.ptp(s.t) - 0.5
@@ -67,9 +68,9 @@ def _design(effect, size, seed):
             z = clean - th[6:9] - be[None, :] * tau[:, None]
             return np.sqrt(np.einsum("ij,jk,ik->i", z, _sym(th[:6]), z)) - 1.0
 
-        return residual, theta, beta, clean, lambda th: (_sym(th[:6]), th[6:9])
+        return residual, theta, beta, clean - b - beta[None, :] * tau[:, None], Q
     # soft iron on a spherical board, a sphere declared: x = diag(gains) v + b
-    gains = 1.0 + size * np.array([3.0, -2.0, 1.0])
+    gains = 1.0 + size * P.SOFT_IRON_GAINS
     Q = np.diag(gains**-2.0)
     k = np.trace(Q) / 3.0
     E = Q / k - np.eye(3)  # the shape beyond a sphere, trace 0
@@ -81,10 +82,7 @@ def _design(effect, size, seed):
         z = clean - th[:3]
         return np.sqrt(th[3] * np.einsum("ij,jk,ik->i", z, np.eye(3) + Es, z)) - 1.0
 
-    def shape(th, be=beta):
-        return th[3] * (np.eye(3) + _sym(np.r_[be[0], be[1], -be[0] - be[1], be[2:5]])), th[:3]
-
-    return residual, theta, beta, clean, shape
+    return residual, theta, beta, clean - b, Q
 
 
 def _jacobian(f, x, h=1e-6):
@@ -99,15 +97,10 @@ def _jacobian(f, x, h=1e-6):
 def _linearised(effect, size, noise, corr, seed):
     """(J_base, J_effect, beta, g, sigma, phi): the residual's Jacobians at the truth, the
     simulated effect, the residual's gradient in each reading, and the reading noise."""
-    residual, theta, beta, clean, shape = _design(effect, size, seed)
+    residual, theta, beta, z, Q = _design(effect, size, seed)
     assert np.max(np.abs(residual(theta, beta))) < 1e-9  # the truth fits exactly
     Jb = _jacobian(lambda th: residual(th, beta), theta)
     Je = _jacobian(lambda be: residual(theta, be), beta)
-    Q, c = shape(theta)
-    z = clean - c
-    if effect == "hard_iron_drift":
-        tau = np.linspace(-0.5, 0.5, len(clean))
-        z = z - beta[None, :] * tau[:, None]
     g = (z @ Q) / np.sqrt(np.einsum("ij,jk,ik->i", z, Q, z))[:, None]  # dr/dx
     return Jb, Je, beta, g, P.SENSOR_NOISE["mag"][noise], P.CORRELATION[corr]
 
@@ -140,10 +133,7 @@ def monte_carlo(effect, size, noise, corr, seed, draws=200) -> tuple[float, floa
     crit = stats.chi2.isf(LEVEL, len(beta))
     hits = 0
     for i in range(draws):
-        rng = 1000 + i
-        n3 = correlated_noise(len(g), sigma, phi, rng=rng) if phi else None
-        if n3 is None:
-            n3 = sigma * np.random.default_rng(rng).normal(size=g.shape)
+        n3 = correlated_noise(len(g), sigma, phi, rng=1000 + i)  # phi 0: white
         y = np.linalg.solve(L, Je @ beta + np.sum(g * n3, axis=1))
         rss = [np.sum((y - A @ np.linalg.lstsq(A, y, rcond=None)[0]) ** 2) for A in (Xb, X)]
         hits += rss[0] - rss[1] > crit
