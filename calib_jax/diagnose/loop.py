@@ -68,7 +68,7 @@ from .floors import (
     rest_floor,
     white_floor,
 )
-from .honest import HELD_OUT_GAIN, held_out_rms, judge
+from .honest import HELD_OUT_GAIN, SlowNoise, held_out_rms, judge, sandwich_cov, slow_noise
 
 BIC_MIN = 10.0  # "very strong" evidence on the Kass-Raftery scale
 BLOCKS = 16
@@ -87,6 +87,7 @@ NULL_SIMS = 8  # beat all 8: a chance pass has probability 1/9 per candidate
 OUTLIER_FAMILYWISE = 0.01
 MIN_OBSERVATIONS = 30  # below: each half has too few points for the split test
 MAX_ROUNDS = 6
+SLOW_NOISE_LAG1_Z = 3.0  # a rest's lag-1 correlation beyond this many 1 / sqrt(n): not white
 STRUCTURE_P = 1e-3  # per-driver significance (before Bonferroni over drivers)
 
 BOUNDS = {
@@ -264,6 +265,7 @@ def _summary(theta, se, status, e, J, w, free) -> dict:
         "status": int(status),
         "converged": is_converged(int(status)),
         "e": e,
+        "J": J,
         "loo": loo,
         "rms": rms,
         "bic": bic,
@@ -586,15 +588,59 @@ def _effect_of(effect, sl, fit) -> tuple[np.ndarray, np.ndarray]:
     return coef, np.where(gain, np.hypot(se, fit["stderr"][0]), se)
 
 
-def _honest_tests(entry, d, fits, jack, held_cur, block, w, free, degree, tried) -> None:
+def _effect_map(effect, sl) -> np.ndarray:
+    """The matrix A (len(sl), 30) with an effect's coefficients = A theta (:func:`_effect_of`)."""
+    A = np.zeros((len(sl), M.N_THETA))
+    A[np.arange(len(sl)), sl] = 1.0
+    if effect == "soft_iron":
+        A[np.isin(sl, (1, 2)), 0] = -1.0
+    return A
+
+
+@dataclass
+class _SlowNoise:
+    """The current model's residual noise (:func:`.honest.slow_noise`) and what the sandwich
+    needs with it: the observations' time order, which of them are fitted, their directions."""
+
+    order: np.ndarray
+    active: np.ndarray  # in time order
+    u: np.ndarray  # (active observations, 3), time order
+    noise: SlowNoise
+
+    @classmethod
+    def of(cls, obs: Observations, cur: dict, w: np.ndarray, free: np.ndarray) -> _SlowNoise:
+        order = np.argsort(obs.t, kind="stable")
+        active = (w > 0)[order]
+        y = _calibrated(
+            cur["theta"],
+            free,
+            obs.x[order][active],
+            obs.tau()[order][active],
+            obs.T()[order][active],
+        )
+        u = y / np.linalg.norm(y, axis=1, keepdims=True)
+        # noise correlated over at most one jackknife block (slow_noise)
+        noise = slow_noise(cur["e"][order][active], u, longest=active.sum() / BLOCKS)
+        return cls(order, active, u, noise)
+
+    def covariance(self, fit: dict, free: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """Covariance of A theta for a fit with parameters ``free`` under this noise."""
+        fr = np.flatnonzero(free)
+        J = fit["J"][self.order][self.active][:, fr]
+        return A[:, fr] @ sandwich_cov(J, self.u, self.noise) @ A[:, fr].T
+
+
+def _honest_tests(entry, d, fits, jack, held_cur, block, w, free, degree, tried, slow) -> None:
     """Add the held-out, halves and honest-significance tests (:mod:`.honest`) to a
-    candidate's entry, from its halves (``fits``) and leave-one-block-out refits ``jack``;
-    ``free``: the current model's mask (a diagonal base's gains are not soft iron's to
-    test); ``tried``: the round's number of candidates."""
+    candidate's entry, from its halves (``fits``), leave-one-block-out refits ``jack`` and
+    the residual's slow noise ``slow`` (:class:`_SlowNoise`); ``free``: the current model's
+    mask (a diagonal base's gains are not soft iron's to test); ``tried``: the round's number
+    of candidates."""
     c = entry["effect"]
     sl = _indices(_slots(c, degree))
     sl = sl[d["free"][sl] & ~free[sl]]
     (coef, se), (c1, se1), (c2, se2) = (_effect_of(c, sl, fits[d[k]]) for k in ("real", "h1", "h2"))
+    fit = fits[d["real"]]
     h = judge(
         coef,
         c1,
@@ -603,6 +649,7 @@ def _honest_tests(entry, d, fits, jack, held_cur, block, w, free, degree, tried)
         np.sqrt(se1**2 + se2**2),
         se,
         tried,
+        slow_cov=None if slow is None else slow.covariance(fit, d["free"], _effect_map(c, sl)),
     )
     held = held_out_rms([f["e"] for f in jack], block, w)
     entry["held_out_gain"] = 1.0 - held / held_cur
@@ -671,7 +718,13 @@ def _run(
     seed: int,
     degree: int,
     progress: bool | None = None,
+    slow_noise_test: bool = False,
 ) -> dict:
+    """The rounds of the loop (the module docstring). ``slow_noise_test``: the log's rest
+    shows correlated noise, so a candidate must also pass the Wald test whose covariance
+    models slow noise (:class:`_SlowNoise`). It is not run otherwise: on white noise the
+    residual of a model without a real drift holds the drift, which that noise model then
+    takes for slow noise (a drift at 1.4x the floor was refused at p 0.003)."""
     tau, T = obs.tau(), obs.T()
     m = obs.m
     rng = np.random.default_rng(seed)
@@ -721,6 +774,7 @@ def _run(
         judged = [c for c in remaining if all(entries[c]["tests"].values())]
         judged.sort(key=lambda c: -entries[c]["delta_bic"])
         best = None
+        slow = _SlowNoise.of(obs, cur, w, free) if judged and slow_noise_test else None
         for c in judged:
             d, fit = idx[c], fits[idx[c]["real"]]
             if jack_cur is None:  # the current model without each block: its held-out errors
@@ -728,7 +782,7 @@ def _run(
             jack = _jackknife(P, fit["theta"], w, d["free"], block)
             held_cur = held_out_rms([f["e"] for f in jack_cur], block, w)
             _honest_tests(
-                entries[c], d, fits, jack, held_cur, block, w, free, degree, len(remaining)
+                entries[c], d, fits, jack, held_cur, block, w, free, degree, len(remaining), slow
             )
             if all(entries[c]["tests"].values()):
                 best = (c, fit, d["free"], jack)
@@ -1449,6 +1503,7 @@ def _mag_loop(
             f"direction turns by more than {REST_TURN_DEG:g} deg across them (a slow part of the "
             "tumble)"
         )
+    slow = False
     if rests:
         iv = max(rests, key=lambda v: v.n)
         rest = nrm_all[iv.start : iv.stop]
@@ -1460,10 +1515,17 @@ def _mag_loop(
             f"floors from the longest rest, samples {iv.start}-{iv.stop} ({iv.n} samples)"
             + correlated_rest_note(phi, iv.n)
         )
+        # white noise gives a lag-1 correlation within about 1 / sqrt(n) of 0
+        slow = bool(phi > SLOW_NOISE_LAG1_Z / np.sqrt(iv.n))
+        if slow:
+            obs.notes.append(
+                f"the rest's noise is correlated (lag-1 {phi:.2f}): an effect must also be "
+                "significant with that slow noise modelled (a Wald test, honest.sandwich_cov)"
+            )
     else:
         white = difference_noise(nrm_all[ok])
         allan = float("nan")
         obs.notes.append("no rest in the log: white floor from first differences, no Allan floor")
     floor = float(np.nanmax([white, allan]))
-    res = _run(obs, cands, floor, seed, degree, progress)
+    res = _run(obs, cands, floor, seed, degree, progress, slow_noise_test=slow)
     return obs, res, (white, allan)
