@@ -246,6 +246,11 @@ def radius_determined(points: np.ndarray, centre: np.ndarray) -> bool:
     return _coverage(np.asarray(points, float), d / n[:, None])[2] < 0
 
 
+# the refusal's words for readings whose radius is a magnetometer's in gauss; calib-jax diagnose
+# looks for them to diagnose a log whose columns name no sensor as the magnetometer instead
+MAGNETOMETER_IN_GAUSS = "A magnetometer in gauss reads 0.25-0.65"
+
+
 def no_accelerometer_unit(
     norm: float,
     fit_norm: float | None = None,
@@ -268,7 +273,7 @@ def no_accelerometer_unit(
     like = ""
     if 0.15 <= norm < 0.7:
         like = (
-            " A magnetometer in gauss reads 0.25-0.65: if this is one, run calib-jax mag "
+            f" {MAGNETOMETER_IN_GAUSS}: if this is one, run calib-jax mag "
             "(or diagnose --sensor mag)."
         )
     elif norm < 0.15:

@@ -19,6 +19,7 @@ def run(args: argparse.Namespace) -> int:
     from ..cli import _enable_x64, detector_options, load_args
 
     _enable_x64()
+    from ..accel import MAGNETOMETER_IN_GAUSS
     from .loop import diagnose_accel, diagnose_mag
 
     # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
@@ -27,13 +28,9 @@ def run(args: argparse.Namespace) -> int:
     defaulted = args.sensor is None
     if args.sensor is None:  # the accelerometer, unless the log has only a magnetometer
         args.sensor = "mag" if log.acc is None and log.mag is not None else "accel"
-        if args.sensor == "accel" and any(  # a guess: neither a header nor the name said
-            n.startswith(("headerless 3-column", "headerless 4-column")) and "names the" not in n
-            for n in log.notes
-        ):
+        if args.sensor == "accel" and (guess := _sensor_guessed(log, args.file)):
             guessed = (
-                f"note: {args.file} has no header: its three columns were diagnosed as an "
-                "accelerometer; for a magnetometer give --sensor mag"
+                f"note: {guess} diagnosed as an accelerometer; for a magnetometer give --sensor mag"
             )
             print(guessed, file=sys.stderr)
     detector = detector_options(args, args.sample_rate or log.sample_rate)
@@ -69,6 +66,17 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         d = diagnose_mag(log, model=args.model, **common)
+    if guessed and d.verdict == "not_possible" and MAGNETOMETER_IN_GAUSS in d.notes[0]:
+        # hamagure's x,y,z file in gauss: refused as an accelerometer, with the flag to give;
+        # the guess was the command's, so it takes the reading the refusal names instead
+        why = d.notes[0].split(": gains")[0].removeprefix("diagnosis not possible: ")
+        print(
+            f"note: {args.file}: {why}, but a magnetometer's in gauss (0.25-0.65): diagnosed as "
+            "a magnetometer instead",
+            file=sys.stderr,
+        )
+        args.sensor, guessed = "mag", ""
+        d = diagnose_mag(load_args(args, sensor="mag"), model=args.model, **common)
     summary = d.summary()
     if d.verdict == "not_possible" and d.notes:  # its reason is the error line below
         summary = summary.replace(f"\n  note: {d.notes[0]}", "", 1)
@@ -101,3 +109,16 @@ def run(args: argparse.Namespace) -> int:
             )
         return 2
     return 0
+
+
+def _sensor_guessed(log, file) -> str:
+    """Where neither a header nor the file's name said which sensor three columns are, the
+    note's words for that (they end where the command's choice is named); else ''."""
+    for n in log.notes:
+        if "names the" in n:  # the file's name decided
+            continue
+        if n.startswith(("headerless 3-column", "headerless 4-column")):
+            return f"{file} has no header: its three columns were"
+        if " name no sensor: " in n:  # 'x,y,z'
+            return f"{file}: its {n.split(' name no sensor')[0]} name no sensor: they were"
+    return ""
