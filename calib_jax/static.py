@@ -837,13 +837,13 @@ def _pose_table_report(x: np.ndarray, valid: np.ndarray) -> StaticReport:
 def _block_report(x: np.ndarray, valid: np.ndarray, block: int) -> StaticReport:
     if block < 1:
         raise ValueError(f"block must be a positive number of samples, got {block}")
-    starts = range(0, len(x) - block + 1, block)
+    nb = len(x) // block  # whole blocks, in one pass (a loop of slices took 6.6 s at block 1)
+    xb = x[: nb * block].reshape(nb, block, -1)
+    keep = np.flatnonzero(valid[: nb * block].reshape(nb, block).all(1))
+    means, stds = xb[keep].mean(1), xb[keep].std(1)
     intervals = [
-        StaticInterval(
-            start=a, stop=a + block, mean=x[a : a + block].mean(0), std=x[a : a + block].std(0)
-        )
-        for a in starts
-        if valid[a : a + block].all()
+        StaticInterval(start=int(k) * block, stop=(int(k) + 1) * block, mean=mu, std=sd)
+        for k, mu, sd in zip(keep, means, stds, strict=True)
     ]
     mask = np.zeros(len(x), bool)
     for iv in intervals:
@@ -1281,8 +1281,12 @@ def distinct_directions(points: np.ndarray, centre: np.ndarray, min_angle_deg: f
     nrm = np.linalg.norm(v, axis=1)
     v = v[nrm > 0] / nrm[nrm > 0, None]
     cos_min = np.cos(np.deg2rad(min_angle_deg))
-    reps: list[np.ndarray] = []
-    for u in v:
-        if not reps or np.max(np.array(reps) @ u) < cos_min:
-            reps.append(u)
-    return len(reps)
+    # in order, each point not within the angle of an earlier representative is one, and
+    # marks the later points within its angle (a Python product per point took 6 s on 51,175)
+    covered = np.zeros(len(v), bool)
+    count = 0
+    for i in range(len(v)):
+        if not covered[i]:
+            count += 1
+            covered[i + 1 :] |= v[i + 1 :] @ v[i] >= cos_min
+    return count

@@ -1265,6 +1265,8 @@ def diagnose_accel(
         )
         d.notes.extend(det_notes)
         return d
+    if max(b - a for a, b in spans) < 2:  # before the fits: --block 1 on a long log took 38 s
+        return _no_floor(m, spans, source, det_notes)
     means = np.array([x[a:b].mean(0) for a, b in spans])
     from ..accel import initial_guess_points
     from ..geometry import sphere_fit_points
@@ -1313,23 +1315,27 @@ def diagnose_accel(
         L = (b - a) // 2
     allan = allan_deviation(rest, L)
     if not np.any(np.isfinite([white, allan])):
-        # one sample per observation (a pose table, --block 1): no floor to judge effects by;
-        # a verdict against a NaN floor would be a guess
-        d = _not_possible(
-            "accel",
-            m,
-            "observations of several samples each",
-            f"the {m} observations have {int(np.median([b - a for a, b in spans]))} sample(s) "
-            "each (a pose table, or --block 1): the noise floor cannot be measured, so no "
-            "effect can be judged against it; diagnose the recording itself (its static "
-            "intervals, or --block with the samples per pose)",
-            source,
-        )
-        d.notes.extend(obs.notes)
-        return d
+        return _no_floor(m, spans, source, obs.notes)
     floor = float(np.nanmax([white, allan]))
     res = _run(obs, cands, floor, seed, degree, progress)
     return _finish(obs, res, (white, allan), "mg", source, 1e3)
+
+
+def _no_floor(m, spans, source, notes) -> Diagnosis:
+    """One sample per observation (a pose table, --block 1): no floor to judge effects by; a
+    verdict against a NaN floor would be a guess."""
+    d = _not_possible(
+        "accel",
+        m,
+        "observations of several samples each",
+        f"the {m} observations have {int(np.median([b - a for a, b in spans]))} sample(s) "
+        "each (a pose table, or --block 1): the noise floor cannot be measured, so no "
+        "effect can be judged against it; diagnose the recording itself (its static "
+        "intervals, or --block with the samples per pose)",
+        source,
+    )
+    d.notes.extend(notes)
+    return d
 
 
 def _run_base_only(obs: Observations) -> np.ndarray:
