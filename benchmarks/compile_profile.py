@@ -2,9 +2,11 @@
 
 As a pytest plugin it records, in each worker, every ``compile_or_get_cached`` call (the
 program's name, seconds, whether JAX's persistent cache hit, the test that caused it, the
-cache key) and JAX's own compile events (tracing, lowering, backend compile) per test file;
-each worker writes ``<pid>.json`` into ``$COMPILE_PROFILE_DIR`` (default
-``/tmp/calib_jax_compile_profile``). Run as a script it sums those files.
+cache key), JAX's own compile events (tracing, lowering, backend compile) per test file, and
+every eager JAX operation (a primitive applied outside jit: a dispatch and a small program
+each) with the test and the first line of ours that ran it; each worker writes
+``<pid>.json`` into ``$COMPILE_PROFILE_DIR`` (default ``/tmp/calib_jax_compile_profile``).
+Run as a script it sums those files.
 
     PYTHONPATH=benchmarks .venv/bin/python -m pytest -p compile_profile
     .venv/bin/python benchmarks/compile_profile.py [DIR]
@@ -27,6 +29,10 @@ OUT = Path(os.environ.get("COMPILE_PROFILE_DIR", "/tmp/calib_jax_compile_profile
 _COMPILES: list[tuple[str, float, bool | None, str, str | None]] = []
 _EVENTS: dict[str, dict[str, float]] = {}
 _TEST = ["<collect>"]
+# eager JAX operations (one primitive applied outside jit, each a dispatch and a small program
+# of its own): per test and the first line of ours that caused it, [count, seconds]
+_EAGER: dict[str, list] = {}
+_OURS = ("/calib_jax/", "/tests/", "/docs/", "/notebooks/", "/benchmarks/")
 
 
 def _install() -> None:
@@ -57,6 +63,30 @@ def _install() -> None:
         per_file[test_file] = per_file.get(test_file, 0.0) + duration
 
     compiler.compile_or_get_cached, compiler._cache_read = compile_, read
+
+    from jax._src import dispatch
+
+    apply_primitive = dispatch.apply_primitive
+
+    def eager(prim, *args, **params):
+        if prim.name == "call_exported":  # a whole program kept on disk (runtime.disk_jit)
+            return apply_primitive(prim, *args, **params)
+        t = time.perf_counter()
+        try:
+            return apply_primitive(prim, *args, **params)
+        finally:
+            f = sys._getframe(1)
+            while f is not None and (
+                "site-packages" in f.f_code.co_filename
+                or not any(o in f.f_code.co_filename for o in _OURS)
+            ):
+                f = f.f_back
+            site = "?" if f is None else f"{f.f_code.co_filename.split('/')[-1]}:{f.f_lineno}"
+            row = _EAGER.setdefault(f"{_TEST[0]} @ {site}", [0, 0.0])
+            row[0] += 1
+            row[1] += time.perf_counter() - t
+
+    dispatch.apply_primitive = eager
     jax.monitoring.register_event_duration_secs_listener(listen)
 
 
@@ -74,16 +104,19 @@ def pytest_runtest_call(item):
 
 def pytest_unconfigure(config):
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / f"{os.getpid()}.json").write_text(json.dumps({"compiles": _COMPILES, "events": _EVENTS}))
+    out = {"compiles": _COMPILES, "events": _EVENTS, "eager": _EAGER}
+    (OUT / f"{os.getpid()}.json").write_text(json.dumps(out))
 
 
 def summary(folder: Path) -> None:
-    compiles, events = [], collections.Counter()
+    compiles, events, eager = [], collections.Counter(), {}
     for f in sorted(folder.glob("*.json")):
         d = json.loads(f.read_text())
         compiles += d["compiles"]
         for event, per_file in d["events"].items():
             events[event] += sum(per_file.values())
+        for where, (n, sec) in d.get("eager", {}).items():
+            eager[where] = [eager.get(where, [0, 0.0])[0] + n, eager.get(where, [0, 0.0])[1] + sec]
     misses = [c for c in compiles if c[2] is False]
     keys, miss_s = len({c[4] for c in misses}), sum(c[1] for c in misses)
     print(f"{len(compiles)} compiles, {sum(c[1] for c in compiles):.0f} s")
@@ -99,6 +132,11 @@ def summary(folder: Path) -> None:
         print(f"\nby {title} (seconds, compiles)")
         for k, (n, s) in sorted(total.items(), key=lambda kv: -kv[1][1])[:15]:
             print(f"{s:8.1f} {n:5d}  {k}")
+    if eager:
+        n_all, s_all = sum(v[0] for v in eager.values()), sum(v[1] for v in eager.values())
+        print(f"\neager operations: {n_all} in {s_all:.0f} s; by test and the line that ran them")
+        for k, (n, s) in sorted(eager.items(), key=lambda kv: -kv[1][1])[:25]:
+            print(f"{s:8.1f} {n:7d}  {k}")
 
 
 if __name__ == "__main__":

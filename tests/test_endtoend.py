@@ -27,11 +27,10 @@ def _simulated(seed=0, n=300):
     az = rng.uniform(0, 2 * np.pi, n)
     head = rng.uniform(-np.pi, np.pi, n)
     rv = np.column_stack([tilt * np.cos(az), tilt * np.sin(az), np.zeros(n)])
-    Cs = [
-        np.asarray(rotvec_to_dcm(jnp.array([0.0, 0.0, h])))
-        @ np.asarray(rotvec_to_dcm(jnp.asarray(v)))
-        for h, v in zip(head, rv, strict=True)
-    ]
+    # vmapped: one program each (called per sample, eager jnp took 50 s of the file's 310)
+    dcms = jax.jit(jax.vmap(rotvec_to_dcm))
+    heading = np.column_stack([np.zeros((n, 2)), head])
+    Cs = np.asarray(dcms(jnp.asarray(heading))) @ np.asarray(dcms(jnp.asarray(rv)))
     W = np.array([[1.05, 0.03, -0.02], [0.03, 0.95, 0.01], [-0.02, 0.01, 1.0]])
     c = np.array([0.2, -0.1, 0.3])
     R = np.asarray(rotvec_to_dcm(jnp.radians(jnp.array([3.0, -2.0, 1.5]))))  # mag -> acc
@@ -39,13 +38,13 @@ def _simulated(seed=0, n=300):
     m_acc = np.stack([C.T @ r_m for C in Cs])
     mag = (m_acc @ R) @ np.linalg.inv(W).T + c + 1e-3 * rng.normal(size=(n, 3))
     off = np.array([np.radians(1.5), np.radians(-1.0), np.radians(0.8), np.radians(3.0)])
-    q_true = np.stack([np.asarray(dcm_to_quat(jnp.asarray(C))) for C in Cs])
+    q_true = np.asarray(jax.jit(jax.vmap(dcm_to_quat))(jnp.asarray(Cs)))
     # the reference is off by the offset: fix(q_ref) = q_z(h) q_ref q_b(v) = q_true, so
     # q_ref = q_z(-h) q_true q_b(v)^-1
     qz_inv = jnp.array([np.cos(-off[3] / 2), 0, 0, np.sin(-off[3] / 2)])
     qb_inv = dcm_to_quat(rotvec_to_dcm(jnp.asarray(off[:3])).T)
-    q_ref = np.stack(
-        [np.asarray(quat_multiply(qz_inv, quat_multiply(jnp.asarray(q), qb_inv))) for q in q_true]
+    q_ref = np.asarray(
+        jax.jit(jax.vmap(lambda q: quat_multiply(qz_inv, quat_multiply(q, qb_inv))))(q_true)
     )
     return acc, mag, q_ref, dict(W=W, c=c, R=R, offset=off)
 
