@@ -64,16 +64,17 @@ def _install() -> None:
 
     compiler.compile_or_get_cached, compiler._cache_read = compile_, read
 
-    from jax._src import dispatch
+    from jax._src import core
 
-    apply_primitive = dispatch.apply_primitive
+    process_primitive = core.EvalTrace.process_primitive
+    programs = ("call_exported", "jit", "pjit")  # whole programs (jit, runtime.disk_jit)
 
-    def eager(prim, *args, **params):
-        if prim.name == "call_exported":  # a whole program kept on disk (runtime.disk_jit)
-            return apply_primitive(prim, *args, **params)
+    def eager(self, prim, args, params, /):
+        if prim.name in programs:
+            return process_primitive(self, prim, args, params)
         t = time.perf_counter()
         try:
-            return apply_primitive(prim, *args, **params)
+            return process_primitive(self, prim, args, params)
         finally:
             f = sys._getframe(1)
             while f is not None and (
@@ -86,7 +87,7 @@ def _install() -> None:
             row[0] += 1
             row[1] += time.perf_counter() - t
 
-    dispatch.apply_primitive = eager
+    core.EvalTrace.process_primitive = eager
     jax.monitoring.register_event_duration_secs_listener(listen)
 
 

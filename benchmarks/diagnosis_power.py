@@ -421,6 +421,12 @@ def figure(rows, path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
+def _load() -> str:
+    """The machine's 1-minute load average ('?' where /proc/loadavg is not)."""
+    f = Path("/proc/loadavg")
+    return f.read_text().split()[0] if f.exists() else "?"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
@@ -440,7 +446,7 @@ def main() -> None:
         figure(saved["rows"], out / "diagnosis_power.png")
         return
     t0 = time.perf_counter()
-    load = Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").exists() else "?"
+    load = _load()
     todo = groups(args.parts, tuple(args.noise))
     rows = []
     if args.workers > 1:  # whole groups in worker processes (each compiles its own fits)
@@ -467,7 +473,7 @@ def main() -> None:
         "seeds": args.seeds,
         "seconds": time.perf_counter() - t0,
         "machine": f"{platform.machine()}, {jax.devices()[0].device_kind}",
-        "load": load,
+        "load": f"{load} at the start, {_load()} at the end",  # the 1-minute averages
     }
     old = out / "diagnosis_power.json"
     runs = [run]
