@@ -722,40 +722,6 @@ def test_diagnose_chooses_the_magnetometer_of_a_log_without_an_accelerometer(
     assert "has no header" not in capsys.readouterr().err
 
 
-def test_diagnose_takes_columns_that_name_no_sensor_in_gauss_as_the_magnetometer(
-    tmp_path, capsys, monkeypatch
-):
-    """hamagure's magnetometer CSV (header x,y,z, gauss; MIT): `calib-jax diagnose FILE`
-    guessed an accelerometer and refused it, naming --sensor mag. The guess was the command's,
-    and the refusal knows the radius is a magnetometer's in gauss, so the command now diagnoses
-    the magnetometer instead and says why. Built from CK-Explorer's field scaled to a 0.45 G
-    sphere (radius 0.49 about the accelerometer's fitted centre); the refusal is the real one,
-    the magnetometer's diagnosis a stub that records what reached it."""
-    from calib_jax.diagnose import loop
-
-    calls = []
-
-    def stub(log, **kw):
-        calls.append(log)
-        raise ValueError("stub reached")
-
-    monkeypatch.setattr(loop, "diagnose_mag", stub)
-    m = cj.load_log(mag_demo_log_path()).mag
-    c = np.median(m, axis=0)
-    gauss = (m - c) / np.median(np.linalg.norm(m - c, axis=1)) * 0.45 + [-0.25, 0.27, -0.1]
-    path = tmp_path / "data-set.csv"
-    np.savetxt(path, gauss, delimiter=",", header="x,y,z", comments="")
-    assert main(["diagnose", str(path), "--no-progress"]) == 2  # the stub's error
-    err = capsys.readouterr().err
-    assert "x, y, z name no sensor: they were diagnosed as an accelerometer" in err
-    assert "but a magnetometer's in gauss (0.25-0.65): diagnosed as a magnetometer" in err
-    [log] = calls
-    np.testing.assert_allclose(log.mag, gauss, rtol=1e-12)
-    # a named accelerometer is never re-read: the user's word (or the header's) stands
-    assert main(["diagnose", str(path), "--sensor", "accel", "--no-progress"]) == 2
-    assert len(calls) == 1 and "diagnosed as a magnetometer" not in capsys.readouterr().err
-
-
 def test_marg_names_gravity_held_in_one_direction(tmp_path, capsys):
     """PX4's bench log (one pose): `calib-jax marg` blamed 'field directions in one plane ...
     a turn about a single axis' - the accelerometer's ellipsoid refusal worded for a field.

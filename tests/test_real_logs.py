@@ -283,23 +283,45 @@ def test_ximu3_magnetometer_file_names_its_sensor_and_a_still_board_is_no_calibr
     assert "names the magnetometer" in err and "'ax=X Axis (a.u.)'" in err, err
 
 
-def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(tmp_path, capsys):
+def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(
+    tmp_path, capsys, monkeypatch
+):
     """HamaguRe's magnetometer log in gauss (tests/data/hamagure_mag/NOTES.md, MIT): header
     'x,y,z', a hard-iron offset of 0.77 G beside a field of 0.41 G. Its median norm about zero,
     0.88, lies in the band an accelerometer in g reads, so calib-jax accel calibrated it with
     gains of 0.39-0.44 and status ok, and calib-jax diagnose diagnosed it in mg. The readings
     surround their fitted centre, so the radius (gravity in their unit) decides: 0.41 is no
-    accelerometer's, and both commands say it looks like a magnetometer in gauss. calib-jax mag
+    accelerometer's, and both commands say it looks like a magnetometer in gauss; diagnose,
+    whose accelerometer was its own guess, then diagnoses the magnetometer. calib-jax mag
     reads the same columns as a magnetometer: radius 0.41. calib-jax batch (and record's
     post-fit) take the same rule (fleet.prepare_log)."""
     path = Path(__file__).parent / "data" / "hamagure_mag" / "data-set_1.csv"
     assert main(["accel", str(path)]) == 2
     err = capsys.readouterr().err
     assert "sphere of radius 0.41" in err and "magnetometer in gauss" in err, err
-    assert main(["diagnose", str(path)]) == 2
+    # diagnose's guess (its columns name no sensor) gives way to the magnetometer the refusal
+    # names, with a note; the magnetometer's diagnosis is a stub recording what reached it
+    # (run whole: 'unexplained structure', 34 s)
+    from calib_jax.diagnose import loop
+
+    reached = []
+
+    def stub(log, **kw):
+        reached.append(log)
+        raise ValueError("stub reached")
+
+    monkeypatch.setattr(loop, "diagnose_mag", stub)
+    assert main(["diagnose", str(path), "--no-progress"]) == 2  # the stub's error
     said = "".join(capsys.readouterr())
-    assert "sphere of radius 0.41" in said and "diagnose --sensor mag" in said, said
+    assert "x, y, z name no sensor: they were diagnosed as an accelerometer" in said, said
+    assert "sphere of radius 0.41" in said and "diagnosed as a magnetometer instead" in said
     assert "it needs at least" not in said, said
+    [log] = reached
+    np.testing.assert_array_equal(log.mag, cj.load_log(path, sensor="mag").mag)
+    # the user's word stands: a named accelerometer is refused, with the flag for the other
+    assert main(["diagnose", str(path), "--sensor", "accel", "--no-progress"]) == 2
+    said = "".join(capsys.readouterr())
+    assert "diagnose --sensor mag" in said and len(reached) == 1, said
     (tmp_path / path.name).write_bytes(path.read_bytes())  # the batch: the same rule
     assert main(["batch", str(tmp_path)]) == 1
     out = capsys.readouterr().out
