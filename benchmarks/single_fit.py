@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 from _device import describe, label, suffix  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
-from calib_jax.accel import _compiled, initial_guess  # noqa: E402
+from calib_jax.accel import _fit_program, initial_guess  # noqa: E402
 from calib_jax.models.accel import normalized_sphere_residual  # noqa: E402
 from calib_jax.simulate import random_params, simulate_accel  # noqa: E402
 
@@ -47,7 +47,7 @@ def main() -> None:
     rows = {}
 
     for solver in ("lm1", "lm2", "lm3", "optimistix"):
-        fit = _compiled(solver, "accel9", ())
+        fit = _fit_program(solver, "accel9", ())
         t0 = time.perf_counter()
         r = fit(x, w)
         r.params.block_until_ready()

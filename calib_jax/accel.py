@@ -43,7 +43,15 @@ from .geometry import (
 )
 from .implicit import solve_implicit
 from .io.files import SensorLog, as_log
-from .lm import LMResult, checked_solver_options, fit_status, lm_solve, status_message
+from .lm import (
+    LMResult,
+    budget_apart,
+    checked_solver_options,
+    fit_status,
+    lm_solve,
+    status_message,
+    with_budget,
+)
 from .models.accel import ALPHA_ENTRIES, PARAM_NAMES, normalized_sphere_residual
 from .observations import (
     AccelObservations,
@@ -192,11 +200,24 @@ def fit_normalized(
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(solver: str, model: str, options: tuple) -> Callable:
-    return disk_jit(
-        functools.partial(fit_normalized, solver=solver, model=model, **dict(options)),
-        f"accel.fit_normalized {solver} {model} {options!r}",
-    )
+def _compiled(solver: str, model: str, options: tuple, budgeted: bool) -> Callable:
+    name = f"accel.fit_normalized {solver} {model} {options!r}"
+    if not budgeted:
+        return disk_jit(
+            functools.partial(fit_normalized, solver=solver, model=model, **dict(options)), name
+        )
+
+    def fit(x, w, max_iter):
+        return fit_normalized(x, w, solver, model, max_iter=max_iter, **dict(options))
+
+    return disk_jit(fit, f"{name} budget")
+
+
+def _fit_program(solver: str, model: str, options: tuple) -> Callable:
+    """The compiled fit ``(x, w) -> LMResult`` for these solver options; the iteration budget
+    is its argument, not its key (:func:`calib_jax.lm.budget_apart`)."""
+    key, budget = budget_apart(solver, options)
+    return with_budget(_compiled(solver, model, key, budget is not None), budget)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -810,7 +831,7 @@ class _NormalisedFit:
 def _fit_normalised(solver, model, opts, xpad, wpad, k, g, c_s) -> _NormalisedFit:
     """Fit ``model`` to the padded unit-radius points; parameters back in raw units (gains and
     cross terms scale by k / g, biases by k and shift by the centre c_s)."""
-    res = _compiled(solver, model, opts)(xpad, wpad)
+    res = _fit_program(solver, model, opts)(xpad, wpad)
     T = np.concatenate([np.full(6, k / g), np.full(3, k)])
     params = np.asarray(res.params, float) * T
     params[6:9] += c_s

@@ -47,7 +47,7 @@ from .accel import MODELS as ACCEL_MODELS
 from .calibration import BatchRecord
 from .geometry import moments, normalised_moments
 from .linalg import cholesky_small, eigh_small, inv3
-from .lm import checked_solver_options, lm_solve
+from .lm import budget_apart, checked_solver_options, lm_solve, with_budget
 from .mag import FLAT_POINTS, ellipsoid_start_moments
 from .models.accel import alpha_matrix
 from .models.mag import (
@@ -399,14 +399,23 @@ def _mag_one(S, mean, k, field, model, solver, options, min_points):
 
 @functools.lru_cache(maxsize=32)
 def _compiled(
-    kind: str, model: str, solver: str, options: tuple, shard: bool, min_points: int = MIN_SAMPLES
+    kind: str,
+    model: str,
+    solver: str,
+    options: tuple,
+    shard: bool,
+    min_points: int = MIN_SAMPLES,
+    budgeted: bool = False,
 ):
+    """The batch fit ``(raw, valid, ref) -> BatchResult``, and with ``budgeted`` the iteration
+    budget as a last argument (:func:`calib_jax.lm.budget_apart`)."""
     one = _accel_one if kind == "accel" else _mag_one
 
-    def run(raw, valid, ref):
+    def run(raw, valid, ref, *budget):
+        opts = dict(options) | ({"max_iter": budget[0]} if budget else {})
         S, mean, k = _batch_moments(raw, valid)
         params, stderr, status, rms, res, bad = jax.vmap(
-            lambda S, m, k, r: one(S, m, k, r, model, solver, dict(options), min_points)
+            lambda S, m, k, r: one(S, m, k, r, model, solver, opts, min_points)
         )(S, mean, k, ref)
         nan = jnp.nan
         return BatchResult(
@@ -425,7 +434,8 @@ def _compiled(
 
         mesh = Mesh(np.array(jax.devices()), ("sensors",))
         P = PartitionSpec("sensors")
-        run = jax.shard_map(run, mesh=mesh, in_specs=(P, P, P), out_specs=P, check_vma=False)
+        specs = (P, P, P) + (PartitionSpec(),) * budgeted  # the budget: one for all devices
+        run = jax.shard_map(run, mesh=mesh, in_specs=specs, out_specs=P, check_vma=False)
     return jax.jit(run)
 
 
@@ -546,7 +556,9 @@ def calibrate_accel_batch(
     g = check_magnitude(g, "g", n)
     raw, valid, ref = _prepare(raw, mask, g, shard)
     opts = checked_solver_options(solver, solver_options)
-    out = _compiled("accel", model, solver, opts, shard, int(min_points))(raw, valid, ref)
+    key, budget = budget_apart(solver, opts)
+    fit = _compiled("accel", model, solver, key, shard, int(min_points), budget is not None)
+    out = with_budget(fit, budget)(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)
 
 
@@ -575,5 +587,7 @@ def calibrate_mag_batch(
     field = np.nan if field is None else check_magnitude(field, "field", n)
     raw, valid, ref = _prepare(raw, mask, field, shard)
     opts = checked_solver_options(solver, solver_options)
-    out = _compiled("mag", model, solver, opts, shard)(raw, valid, ref)
+    key, budget = budget_apart(solver, opts)
+    fit = _compiled("mag", model, solver, key, shard, MIN_SAMPLES, budget is not None)
+    out = with_budget(fit, budget)(raw, valid, ref)
     return jax.tree.map(lambda a: a[:n], out)

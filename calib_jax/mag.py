@@ -50,11 +50,13 @@ from .implicit import solve_implicit
 from .io.files import SensorLog, as_log
 from .lm import (
     LMResult,
+    budget_apart,
     checked_solver_options,
     fit_status,
     is_converged,
     lm_solve,
     status_message,
+    with_budget,
 )
 from .models.mag import (
     MAG_MODELS,
@@ -197,11 +199,26 @@ def _fit_measured(x, w, *, solver: str, model: str, **options):
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(solver: str, model: str, options: tuple):
-    return disk_jit(
-        functools.partial(_fit_measured, solver=solver, model=model, **dict(options)),
-        f"mag.fit_measured {solver} {model} {options!r}",
+def _compiled(solver: str, model: str, options: tuple, budgeted: bool, moments: bool = False):
+    """The compiled fit of padded samples (x, w), or of their moments (S) with ``moments``;
+    ``budgeted``: the iteration budget is its last argument (:func:`calib_jax.lm.budget_apart`)."""
+    fit, what = (
+        (_fit_from_moments, "fit_from_moments") if moments else (_fit_measured, "fit_measured")
     )
+    name = f"mag.{what} {solver} {model} {options!r}"
+    if not budgeted:
+        return disk_jit(functools.partial(fit, solver=solver, model=model, **dict(options)), name)
+
+    def run(*args):
+        *data, max_iter = args
+        return fit(*data, solver=solver, model=model, max_iter=max_iter, **dict(options))
+
+    return disk_jit(run, f"{name} budget")
+
+
+def _fit_program(solver: str, model: str, options: tuple, moments: bool = False):
+    key, budget = budget_apart(solver, options)
+    return with_budget(_compiled(solver, model, key, budget is not None, moments), budget)
 
 
 @functools.lru_cache(maxsize=8)
@@ -248,11 +265,11 @@ def _fit(xn: np.ndarray, model: str, solver: str, opts: tuple):
     samples, centre and M as numpy. Above MOMENT_FORM_ABOVE samples, from their moments."""
     if len(xn) > MOMENT_FORM_ABOVE:
         S = moments_of(xn)
-        res, c, M, radius = _compiled_moments(solver, model, opts)(S)
+        res, c, M, radius = _fit_program(solver, model, opts, moments=True)(S)
         c, M = np.asarray(c), np.asarray(M)
         return res, c, M, radial_error(c, M, xn, xp=np), float(radius)
     xpad, wpad = pad_rows(xn)
-    res, c, M, rel, radius = _compiled(solver, model, opts)(xpad, wpad)
+    res, c, M, rel, radius = _fit_program(solver, model, opts)(xpad, wpad)
     return res, np.asarray(c), np.asarray(M), np.asarray(rel)[: len(xn)], float(radius)
 
 
@@ -278,14 +295,6 @@ def _fit_from_moments(S, *, solver: str, model: str, **options):
     res = _solve(lambda p: mag_theta(p, model), p0, S, dof, solver, options)
     c, M = unpack(res.params, model)
     return res, c, M, natural_radius(M)
-
-
-@functools.lru_cache(maxsize=64)
-def _compiled_moments(solver: str, model: str, options: tuple):
-    return disk_jit(
-        functools.partial(_fit_from_moments, solver=solver, model=model, **dict(options)),
-        f"mag.fit_from_moments {solver} {model} {options!r}",
-    )
 
 
 def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str], str | None]:

@@ -1,5 +1,9 @@
 """Least-squares solvers: Gavin's Levenberg-Marquardt in JAX and an optimistix cross-check."""
 
+from collections.abc import Callable
+
+import numpy as np
+
 from ..status import (
     FIT_STATUSES,
     Status,
@@ -40,6 +44,27 @@ def checked_solver_options(solver: str, options: dict | None) -> tuple:
     return tuple(sorted((options or {}).items()))
 
 
+def budget_apart(solver: str, options: tuple) -> tuple[tuple, np.ndarray | None]:
+    """(the options a compiled fit is keyed by, its iteration budget as an argument) for the
+    sorted ``options`` of :func:`checked_solver_options`. An LM fit takes ``max_iter`` as a
+    traced argument (the loop only compares with it), so a new ``--max-iter`` reuses the
+    compiled program instead of compiling another; optimistix's ``max_steps`` and the history
+    buffers (``history=True``) are shapes, so there the budget stays in the key (None)."""
+    opts = dict(options)
+    if solver == "optimistix" or opts.get("history"):
+        return options, None
+    budget = np.asarray(opts.pop("max_iter", DEFAULTS.max_iter), np.int32)
+    return tuple(sorted(opts.items())), budget
+
+
+def with_budget(compiled: Callable, budget: np.ndarray | None) -> Callable:
+    """``compiled`` itself where :func:`budget_apart` kept the budget in the key (None), else
+    ``compiled`` with the budget as its last argument."""
+    if budget is None:
+        return compiled
+    return lambda *args: compiled(*args, budget)
+
+
 def __getattr__(name: str):
     # optx_solve on first use: optimistix takes 0.14 s to import, a tenth of a warm CLI call
     # that does not use it
@@ -57,6 +82,7 @@ __all__ = [
     "LMHistory",
     "LMResult",
     "Status",
+    "budget_apart",
     "checked_solver_options",
     "finite_difference_jacobian",
     "fit_status",
@@ -69,4 +95,5 @@ __all__ = [
     "status_message",
     "uncertainty",
     "uncertainty_cholesky",
+    "with_budget",
 ]

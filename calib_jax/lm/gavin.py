@@ -160,7 +160,7 @@ def lm_solve(
     lambda_down: float = DEFAULTS.lambda_down,
     lambda_min: float = DEFAULTS.lambda_min,
     lambda_max: float = DEFAULTS.lambda_max,
-    max_iter: int = DEFAULTS.max_iter,
+    max_iter: int | jax.Array = DEFAULTS.max_iter,
     max_nfev: int | None = None,
     history: bool = False,
     absolute_sigma: bool = False,
@@ -194,7 +194,10 @@ def lm_solve(
     eps1, eps2, eps3, eps4 : float
         Gradient, parameter, reduced-chi2 and acceptance thresholds.
     max_iter, max_nfev : int
-        Iteration and residual-evaluation budgets (static).
+        Iteration and residual-evaluation budgets (static; ``max_iter`` may also be a traced
+        integer scalar, the loop only comparing with it, so that one compiled fit serves every
+        budget: :func:`calib_jax.lm.budget_apart`; not with ``history``, whose buffers it
+        sizes).
     history : bool
         Keep per-iteration chi2, lambda and acceptance in fixed buffers of length max_iter.
     absolute_sigma : bool
@@ -301,7 +304,7 @@ class _Problem(NamedTuple):
     lambda_down: float
     lambda_min: float
     lambda_max: float
-    max_iter: int
+    max_iter: int | jax.Array
     max_nfev: int
     hist_len: int
     history: bool
