@@ -46,6 +46,7 @@ from .io.files import SensorLog, as_log
 from .lm import (
     LMResult,
     budget_apart,
+    budgeted_disk_jit,
     checked_solver_options,
     fit_status,
     lm_solve,
@@ -201,16 +202,12 @@ def fit_normalized(
 
 @functools.lru_cache(maxsize=64)
 def _compiled(solver: str, model: str, options: tuple, budgeted: bool) -> Callable:
-    name = f"accel.fit_normalized {solver} {model} {options!r}"
-    if not budgeted:
-        return disk_jit(
-            functools.partial(fit_normalized, solver=solver, model=model, **dict(options)), name
-        )
-
-    def fit(x, w, max_iter):
-        return fit_normalized(x, w, solver, model, max_iter=max_iter, **dict(options))
-
-    return disk_jit(fit, f"{name} budget")
+    return budgeted_disk_jit(
+        functools.partial(fit_normalized, solver=solver, model=model),
+        f"accel.fit_normalized {solver} {model} {options!r}",
+        options,
+        budgeted,
+    )
 
 
 def _fit_program(solver: str, model: str, options: tuple) -> Callable:

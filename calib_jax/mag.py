@@ -51,6 +51,7 @@ from .io.files import SensorLog, as_log
 from .lm import (
     LMResult,
     budget_apart,
+    budgeted_disk_jit,
     checked_solver_options,
     fit_status,
     is_converged,
@@ -205,15 +206,12 @@ def _compiled(solver: str, model: str, options: tuple, budgeted: bool, moments: 
     fit, what = (
         (_fit_from_moments, "fit_from_moments") if moments else (_fit_measured, "fit_measured")
     )
-    name = f"mag.{what} {solver} {model} {options!r}"
-    if not budgeted:
-        return disk_jit(functools.partial(fit, solver=solver, model=model, **dict(options)), name)
-
-    def run(*args):
-        *data, max_iter = args
-        return fit(*data, solver=solver, model=model, max_iter=max_iter, **dict(options))
-
-    return disk_jit(run, f"{name} budget")
+    return budgeted_disk_jit(
+        functools.partial(fit, solver=solver, model=model),
+        f"mag.{what} {solver} {model} {options!r}",
+        options,
+        budgeted,
+    )
 
 
 def _fit_program(solver: str, model: str, options: tuple, moments: bool = False):

@@ -1,5 +1,6 @@
 """Least-squares solvers: Gavin's Levenberg-Marquardt in JAX and an optimistix cross-check."""
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -57,6 +58,21 @@ def budget_apart(solver: str, options: tuple) -> tuple[tuple, np.ndarray | None]
     return tuple(sorted(opts.items())), budget
 
 
+def budgeted_disk_jit(fun: Callable, key: str, options: tuple, budgeted: bool) -> Callable:
+    """:func:`calib_jax.runtime.disk_jit` of ``fun(*data, **options)``; with ``budgeted`` the
+    program takes the iteration budget as its last argument and passes it as ``max_iter``."""
+    from ..runtime import disk_jit
+
+    if not budgeted:
+        return disk_jit(functools.partial(fun, **dict(options)), key)
+
+    def run(*args):
+        *data, max_iter = args
+        return fun(*data, max_iter=max_iter, **dict(options))
+
+    return disk_jit(run, f"{key} budget")
+
+
 def with_budget(compiled: Callable, budget: np.ndarray | None) -> Callable:
     """``compiled`` itself where :func:`budget_apart` kept the budget in the key (None), else
     ``compiled`` with the budget as its last argument."""
@@ -83,6 +99,7 @@ __all__ = [
     "LMResult",
     "Status",
     "budget_apart",
+    "budgeted_disk_jit",
     "checked_solver_options",
     "finite_difference_jacobian",
     "fit_status",
