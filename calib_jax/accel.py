@@ -53,7 +53,7 @@ from .lm import (
     status_message,
     with_budget,
 )
-from .models.accel import ALPHA_ENTRIES, PARAM_NAMES, normalized_sphere_residual
+from .models.accel import ALPHA_ENTRIES, ALPHA_INDEX, PARAM_NAMES, normalized_sphere_residual
 from .observations import (
     AccelObservations,
     TooFewPoses,
@@ -800,6 +800,34 @@ def _coverage_warnings(
     return warn
 
 
+GAINS_PLAUSIBLE = (0.5, 2.0)
+"""The range of the gains (the eigenvalues of alpha) in units of the data's own scale, g over
+the radius of the readings, that any accelerometer's lie in: a real sensor's differ from its
+nominal sensitivity by a few percent. A fit outside it has run off to a shape no sensor has,
+where the points do not pin it down: 20 'poses' of a phone's hand-held walk (Sensor Logger,
+|a| 0.97-1.19 g about intervals of 0.18 s) gave gains of 69-4,540 and biases of 250-5,080 g;
+with the budget it advised raised, the fit "converged", its rms "6,698x lower", exit 0."""
+
+
+def implausible_gains(params_n) -> str | None:
+    """Why a fit's gains are no accelerometer's (None when they are): ``params_n`` the nine
+    parameters of a fit to unit-radius points (gains and cross terms in units of g over the
+    data's scale); the one rule of the single fit and the batch."""
+    p = np.asarray(params_n, float)  # accel6's cross terms are zeros here
+    ev = np.linalg.eigvalsh(p[ALPHA_INDEX]) if np.all(np.isfinite(p[:6])) else None
+    lo, hi = GAINS_PLAUSIBLE
+    if ev is None or (ev.min() >= lo and ev.max() <= hi):
+        return None
+    return (
+        f"the fitted gains are {ev.min():.3g} to {ev.max():.3g} times the data's own scale, "
+        f"where any accelerometer's lie within {lo:g}-{hi:g} of it: the points do not determine "
+        "the model, so the fit ran to a shape no sensor has. Most often motion was taken for "
+        "poses (see the static-detection notes) or the poses are too few or too alike; more "
+        "iterations (--max-iter) will not help. Record the sensor held still in at least 9 "
+        "distinct orientations; this is no calibration"
+    )
+
+
 def poorly_determined(se_n, model: str) -> list[str]:
     """The free parameters whose standard error in units of g (a unit-radius fit:
     gains and cross terms as they are, biases over the radius) exceeds POOR_STDERR; the one
@@ -836,6 +864,10 @@ def _fit_normalised(solver, model, opts, xpad, wpad, k, g, c_s) -> _NormalisedFi
     corr = np.asarray(res.correlation, float)
     warn: list[str] = []
     status, poor = _status(int(res.status), params, se_n, corr, float(res.condition), model, warn)
+    implausible = implausible_gains(res.params)
+    if implausible:
+        status = "failed"
+        warn.append(implausible)
     return _NormalisedFit(
         res=res,
         params=params,

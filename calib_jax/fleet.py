@@ -197,14 +197,23 @@ def _judge_mag(entry: dict, pts: np.ndarray, se_n: np.ndarray, options: dict) ->
 def _judge_accel(entry: dict, info: dict, model: str) -> None:
     """The single fit's status rule on a batch entry: a fit whose standard errors exceed 1 %
     of g is poorly determined, with the coverage warnings that say why (the batch called a
-    one-hemisphere log with a z gain of 1.51 'ok' where calib-jax accel said so)."""
-    from .accel import POORLY_DETERMINED, poorly_determined
+    one-hemisphere log with a z gain of 1.51 'ok' where calib-jax accel said so), and its rule
+    that gains no accelerometer has are no calibration (:func:`calib_jax.accel.
+    implausible_gains`)."""
+    from .accel import POORLY_DETERMINED, implausible_gains, poorly_determined
 
-    if entry["status"] != "ok":
-        return
-    # standard errors in units of g: gains and cross terms over r / g, biases over r
+    # parameters and standard errors in units of g: gains and cross terms over r / g,
+    # biases over r
     r, g = info["fit_norm"], info["g"]
     scale = np.concatenate([np.full(6, r / g), np.full(3, r)])
+    if entry["status"] in ("ok", "not_converged"):
+        implausible = implausible_gains(np.asarray(entry["params"], float) / scale)
+        if implausible:
+            entry["status"] = "failed"
+            entry["message"] = implausible
+            return
+    if entry["status"] != "ok":
+        return
     poor = poorly_determined(np.asarray(entry["stderr"], float) / scale, model)
     if poor:
         entry["status"] = "poorly_determined"

@@ -328,3 +328,22 @@ def test_a_gauss_magnetometer_with_a_large_offset_is_no_accelerometer(
     assert "not_fitted: the static readings surround their fitted centre" in out, out
     mag = cj.calibrate_mag(cj.load_log(path, sensor="mag"))
     assert mag.status == "ok" and abs(mag.radius - 0.41) < 0.01, (mag.status, mag.radius)
+
+
+def test_a_hand_held_walk_fitted_as_poses_is_no_calibration(tmp_path, capsys):
+    """A phone's hand-held log (tests/data/sensorlogger_phone/NOTES.md, MIT): static detection
+    takes 20 stretches of motion for poses and the fit runs off to gains of 21-2,140 times the
+    data's scale. calib-jax accel called it not converged and advised --max-iter; with the
+    budget raised it "converged", rms "6,698x lower", exit 0. Gains beyond 0.5-2 of the data's
+    scale are no accelerometer's (accel.GAINS_PLAUSIBLE): failed, whatever the budget, saying
+    why; calib-jax batch judges its entry by the same rule (fleet._judge_accel)."""
+    path = Path(__file__).parent / "data" / "sensorlogger_phone" / "AccelerometerUncalibrated.csv"
+    for argv in ([], ["--max-iter", "2000"]):
+        assert main(["accel", str(path), *argv]) == 1
+        out = capsys.readouterr().out
+        assert "status: failed" in out and "no calibration" in out, out
+        assert "the fitted gains are" in out and "--max-iter) will not help" in out, out
+    (tmp_path / path.name).write_bytes(path.read_bytes())
+    main(["batch", str(tmp_path), "--no-progress", "--json", str(tmp_path / "b.json")])
+    [entry] = json.loads((tmp_path / "b.json").read_text())["results"]
+    assert entry["status"] == "failed" and "the fitted gains are" in entry["message"], entry
