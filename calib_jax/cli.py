@@ -350,14 +350,26 @@ def run_batch(args: argparse.Namespace) -> int:
 
     from .fleet import calibrate_files, calibrate_files_dask
 
-    root = Path(args.dir)
-    if not root.is_dir():
-        raise ValueError(f"{root} is not a directory")
-    every = sorted(p for p in root.rglob("*") if p.is_file() and not p.name.startswith("."))
-    if args.pattern is None:
-        paths = [str(p) for p in every if p.name.lower().endswith(LOG_SUFFIXES)]
-    else:
-        paths = sorted(str(p) for p in root.rglob(args.pattern) if p.is_file())
+    # folders are searched for logs; files named on the command line are taken as they are
+    # (`calib-jax batch logs/*.csv` was "unrecognized arguments")
+    roots = [Path(a) for a in args.dir]
+    for r in roots:
+        if not r.exists():
+            raise ValueError(f"{r}: no such file or directory")
+    dirs = [r for r in roots if r.is_dir()]
+    root = roots[0] if len(roots) == 1 else f"{len(roots)} paths"
+    every = sorted(
+        p for d in dirs for p in d.rglob("*") if p.is_file() and not p.name.startswith(".")
+    )
+
+    def logs_in(d: Path) -> list[str]:
+        if args.pattern is None:
+            found = (p for p in d.rglob("*") if p.is_file() and not p.name.startswith("."))
+            return sorted(str(p) for p in found if p.name.lower().endswith(LOG_SUFFIXES))
+        return sorted(str(p) for p in d.rglob(args.pattern) if p.is_file())
+
+    # in the order given, each file once
+    paths = list(dict.fromkeys(p for r in roots for p in (logs_in(r) if r.is_dir() else [str(r)])))
     if not paths:
         wanted = repr(args.pattern) if args.pattern else "a log's name (" + _LOG_NAMES + ")"
         suffixes = collections.Counter(p.suffix.lower() for p in every if p.suffix)
@@ -393,7 +405,8 @@ def run_batch(args: argparse.Namespace) -> int:
     files = f"{len(paths)} file{'s' if len(paths) != 1 else ''}"
     # one model for every log of a batch (calib-jax accel / mag choose per log)
     model = f", model {options['model']} for every log" if "model" in options else ""
-    print(f"calib-jax batch: {files} under {root}, sensor {args.sensor}{model}")
+    place = f" under {root}" if dirs else ""  # files named on the command line: no place
+    print(f"calib-jax batch: {files}{place}, sensor {args.sensor}{model}")
     if others:
         shown = ", ".join(p.name for p in others[:4]) + (", ..." if len(others) > 4 else "")
         which = f"matching {args.pattern!r}" if args.pattern else f"named like a log ({_LOG_NAMES})"
@@ -875,9 +888,12 @@ def build_parser() -> argparse.ArgumentParser:
     gy.set_defaults(func=run_gyro, output_files=(("json", "--json"),))
 
     b = sub.add_parser(
-        "batch", help="calibrate every log under a directory, in chunks (or on a Dask cluster)"
+        "batch",
+        help="calibrate every log under a directory or named, in chunks (or on a Dask cluster)",
     )
-    b.add_argument("dir")
+    b.add_argument(
+        "dir", nargs="+", metavar="PATH", help="folders (searched for logs) or log files"
+    )
     b.add_argument(
         "--pattern",
         default=None,
@@ -1129,6 +1145,8 @@ def _error_text(exc: BaseException, args: argparse.Namespace) -> str:
     else:
         msg = str(exc) or type(exc).__name__
     where = getattr(args, "file", None) or getattr(args, "dir", None)
+    if isinstance(where, list):  # batch's paths: one names the place, several do not
+        where = where[0] if len(where) == 1 else None
     named = [str(w) for w in (where, getattr(args, "calibration", None)) if w]
     if where and not isinstance(exc, _OutputError) and not any(w in msg for w in named):
         msg = f"{where}: {msg}"

@@ -211,6 +211,15 @@ def test_batch_reads_compressed_logs_and_names_what_it_left_out(fleet_dir, tmp_p
     assert "NOTES.md; set --pattern to read them" in printed
     (entry,) = json.loads(out.read_text())["results"]
     assert entry["status"] == "ok" and entry["path"].endswith("imu0.csv.gz")
+    # files named on the command line are read as they are, beside folders (`batch logs/*`
+    # was "unrecognized arguments"); a path that does not exist is named
+    assert main(["batch", str(d / "imu0.csv.gz"), str(src / "imu1.csv"), "--json", str(out)]) == 0
+    assert "calib-jax batch: 2 files, sensor accel" in capsys.readouterr().out
+    got = json.loads(out.read_text())["results"]
+    assert [Path(e["path"]).name for e in got] == ["imu0.csv.gz", "imu1.csv"]
+    assert got[0]["params"] == entry["params"]
+    assert main(["batch", str(d), str(tmp_path / "missing.csv")]) == 2
+    assert "missing.csv: no such file or directory" in capsys.readouterr().err
 
 
 def test_batch_magnetometer_entries_get_the_single_fits_verdict(tmp_path):
@@ -297,7 +306,7 @@ def test_a_log_read_but_with_too_few_poses_keeps_its_notes(tmp_path):
 
 def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nope")]) == 2
-    assert "not a directory" in capsys.readouterr().err
+    assert "nope: no such file or directory" in capsys.readouterr().err
     assert main(["batch", str(tmp_path), "--pattern", "*.xyz"]) == 2
     assert "no files matching '*.xyz'" in capsys.readouterr().err
     # a folder of Xsens MT Manager .txt exports (no log suffix): the refusal said only "set
