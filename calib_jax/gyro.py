@@ -44,6 +44,7 @@ from .models.gyro import (
     gravity_residual_asymmetric,
     to_imu_tk,
 )
+from .observations import TooFewPoses
 from .padding import bucket
 from .runtime import disk_jit
 from .static import looks_like_pose_table, quarter_turn
@@ -959,7 +960,18 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     own_accel = accel is None
     if accel is None:
         # six-face logs: gravity's direction needs no cross terms
-        accel = calibrate_accel(acc, sample_rate=rate, **{"model": "auto", **(accel_options or {})})
+        try:
+            accel = calibrate_accel(
+                acc, sample_rate=rate, **{"model": "auto", **(accel_options or {})}
+            )
+        except TooFewPoses as exc:  # say whose poses: a gyro user read only of "the model"
+            raise TooFewPoses(
+                "the gyro is fitted to the turns between the accelerometer's static poses, "
+                f"and the accelerometer has {exc.finding}",
+                exc.n_distinct,
+                exc.model,
+                exc.samples_tried,
+            ) from None
         notes.append(
             f"accelerometer calibrated first: {accel.n_intervals} static poses, status "
             f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
