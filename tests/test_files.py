@@ -1256,6 +1256,42 @@ def test_a_headerless_log_with_the_gyroscope_first_is_read_by_its_data(tmp_path,
     assert "gx gy gz ax ay az mx my mz" in note and "gyroscope first" in note, note
 
 
+def test_sensor_names_with_an_index_after_a_chip_read_as_axes(tmp_path):
+    """OpenAXES's logs (OpenAXES-IMU/OpenAXES; not shipped, its licence unclear): ';'-separated,
+    a MAC address and an IMU name in text, TIME in us, four QUATERNION_n columns of zeros, two
+    accelerometers ACCEL_ADXL355_0..2 and ACCEL_BMI160_0..2 (m/s^2), GYRO_0..2 (rad/s) and
+    GYRO_ECC_0..2. Every command refused it: 'a sensor-fusion output (QUATERNION_0, ...),
+    nothing here to calibrate'. An index 0-2 after a separator is an axis, as [0]-[2] was; the
+    second accelerometer gets the two-sensors note, naming both chips."""
+    rng = np.random.default_rng(0)
+    n = 40
+    adxl, bmi, gyro = rng.normal(size=(3, n, 3))
+    names = ["MAC", "IMU", "TIME", "INDEX", *(f"QUATERNION_{k}" for k in range(4))]
+    names += [f"ACCEL_ADXL355_{k}" for k in range(3)] + [f"ACCEL_BMI160_{k}" for k in range(3)]
+    names += [f"GYRO_{k}" for k in range(3)] + [f"GYRO_ECC_{k}" for k in range(3)]
+    rows = [
+        ";".join(
+            ["18:04:ED:C4:75:1A", "imu9", str(1655928838621431 + 11213 * i), str(51 + i)]
+            + ["0.000000"] * 4
+            + [f"{v:.6f}" for v in (*adxl[i], *bmi[i], *gyro[i])]
+            + ["0"] * 3
+        )
+        for i in range(n)
+    ]
+    p = tmp_path / "log_imu9.csv"
+    p.write_text(";".join(names) + "\n" + "\n".join(rows) + "\n")
+    log = load_log(p)
+    np.testing.assert_allclose(log.acc, adxl, atol=5e-7)  # 6 decimals in the file
+    np.testing.assert_allclose(log.gyro, gyro, atol=5e-7)
+    assert log.mag is None and log.t[1] - log.t[0] == pytest.approx(0.011213, abs=1e-6)  # us
+    [twice] = [x for x in log.notes if "twice" in x]
+    assert "ax (ACCEL_ADXL355_0, column 9, and ACCEL_BMI160_0, 12)" in twice, twice
+    other = load_log(p, columns=twice.split("--columns ")[1].split()[0])
+    np.testing.assert_allclose(other.acc, bmi, atol=5e-7)
+    for name in ("GYRO_ECC_0", "QUATERNION_0", "INDEX", "acc2"):
+        assert canonical_name(name) is None, name
+
+
 def test_a_header_naming_two_sensors_says_so_and_how_to_read_the_second(tmp_path):
     """gaitmap's example (mad-lab-fau/gaitmap, MIT): a line 'sensor,left_sensor,...,
     right_sensor,...' over 'axis,acc_x,...,gyr_z,acc_x,...,gyr_z', two foot IMUs. Six notes

@@ -230,7 +230,8 @@ def bare_axis(name: str) -> str | None:
 def _name_by_words(name: str) -> str | None:
     """'field.angular_velocity.x' -> 'gx', 'accelerometer_m_s2[0]' -> 'ax', 'X (µT)' -> 'mx':
     one sensor (named by a word, or by the unit in brackets), one axis (a last word x, y or z,
-    or an index [0]-[2]) and no word beside them but units and fillers."""
+    or an index [0]-[2], or _0-_2 as OpenAXES's 'ACCEL_BMI160_0') and no word beside them but
+    units and fillers."""
     low = name.strip().lower()
     index = re.search(r"\[\s*([012])\s*\]\s*$", low)
     units = [u.strip() for u in re.findall(r"[\(\[]([^\)\]]*)[\)\]]", low)]
@@ -245,6 +246,10 @@ def _name_by_words(name: str) -> str | None:
     # quantity
     words = [w for w in words if not (re.search(r"\d", w) and re.search(r"[a-z]", w))]
     axis = "xyz"[int(index.group(1))] if index else None
+    # an index 0-2 as the last word, after a separator: OpenAXES's 'ACCEL_BMI160_0', 'GYRO_2'
+    trailing = re.search(r"[_.\- ]([012])$", low)
+    if axis is None and trailing and words and words[-1] == trailing.group(1):
+        axis = "xyz"[int(words.pop())]
     if axis is None and words and words[-1] in ("x", "y", "z"):
         axis = words.pop()
     if axis is None and set(words) - _FILLER_WORDS - {"unix"} == {"timestamp"}:
@@ -1922,8 +1927,11 @@ def _named_twice(header: list[str], source: dict[str, int], again: dict[str, int
     """The note for sensor columns a header names twice (gaitmap's two foot IMUs, left_sensor
     and right_sensor, both acc_x ... gyr_z): the first of each is read, and a positional
     --columns reads the others."""
-    which = ", ".join(
-        f"{header[j]} (columns {source[c] + 1} and {j + 1})" for c, j in again.items()
+    which = ", ".join(  # gaitmap's names are the same twice, OpenAXES's differ by chip
+        f"{header[j]} (columns {source[c] + 1} and {j + 1})"
+        if header[j] == header[source[c]]
+        else f"{c} ({header[source[c]]}, column {source[c] + 1}, and {header[j]}, {j + 1})"
+        for c, j in again.items()
     )
     pick = ["_"] * len(header)
     if "t" in source and "t" not in again:
