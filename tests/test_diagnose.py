@@ -841,3 +841,5 @@ def test_a_partial_tumble_whose_ellipsoid_base_fails_is_diagnosed_from_the_spher
     assert main(["diagnose", str(path), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "only 2 distinct poses" in err and "also holds magnetometer columns: --sensor mag" in err
+    # the pose count the model needs, said once (it followed as "; it needs at least 9 ...")
+    assert "needs at least 9 poses" in err and "it needs at least" not in err, err

@@ -1246,6 +1246,7 @@ def diagnose_accel(
                     if exc.n_distinct >= 6
                     else ""
                 )
+                need = None  # the finding says how many poses the model needs
             d = _not_possible("accel", 0, need, why, source)
             d.notes.extend(det_notes)
             return d
