@@ -268,8 +268,14 @@ class StaticReport:
         w = f"window {self.window} samples"
         if sample_rate:
             w += f" ({self.window / sample_rate:.3g} s)"
+        # the level is a variance summed over the axes: also said as the rms per axis, as the
+        # readings are measured (two new users read "noise level 4.1e-05" of a log in g as a
+        # standard deviation)
         f = (
-            f"threshold {self.factor:g} x noise level {self.noise_level:.3g}"
+            f"threshold {self.factor:g} x noise level {self.noise_level:.3g} (the moving "
+            f"variance's 10th percentile, summed over the axes: "
+            f"{np.sqrt(max(self.noise_level, 0.0) / 3):.3g} rms per axis, measured as the "
+            "readings are)"
             if self.factor is not None
             else f"threshold {self.threshold:.3g} (given)"
         )
