@@ -74,7 +74,10 @@ from .models.mag import (
 from .observations import screen_samples
 from .padding import pad_rows
 from .runtime import disk_jit
-from .sphere import sphere_coverage  # noqa: F401  (re-exported: calib_jax.mag.sphere_coverage)
+from .sphere import (
+    coverage_about,
+    sphere_coverage,  # noqa: F401  (re-exported: calib_jax.mag.sphere_coverage)
+)
 from .status import is_usable
 
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
@@ -406,9 +409,7 @@ def _check_not_flat(
             cs = np.asarray(sphere_fit_moments(jnp.asarray(moments_of(xn)))[0])
         else:
             cs, _ = sphere_fit_points(xn)
-        dirs = xn - cs
-        dirs /= np.maximum(_norms(dirs), 1e-300)[:, None]  # in place
-        _, min_eig, unseen = sphere_coverage(dirs)
+        _, min_eig, unseen = coverage_about(xn, cs, cells=None)
         normal = unseen if min_eig < FLAT else None
     if normal is None:
         return
@@ -702,14 +703,8 @@ def _calibrated_coverage(
     """(the share of the sphere of directions the calibrated samples cover, their norms |y|),
     y = W (x - c); below half, unless the fit failed anyway, a warning in ``warn``. Taken on
     the calibrated sphere: directions about a sphere fitted to distorted data overstate it."""
-    y = x - centre  # then W (x - c), made unit in place below (x W^T - c W^T would cancel)
-    y = y @ W.T
-    ny = _norms(y)
-    if np.all(np.isfinite(y)):
-        y /= ny[:, None]
-        frac, _, unseen = sphere_coverage(y)
-    else:
-        frac, unseen = 0.0, np.full(3, np.nan)
+    ny = np.empty(len(x))  # W (x - c) chunk by chunk (x W^T - c W^T would cancel)
+    frac, _, unseen = coverage_about(x, centre, W, norms_out=ny)
     if frac < 0.5 and status != "failed":
         warn.append(
             f"the data cover {100 * frac:.0f} % of the sphere of directions (least seen axis "
