@@ -408,12 +408,17 @@ def _compiled(
     budgeted: bool = False,
 ):
     """The batch fit ``(raw, valid, ref) -> BatchResult``, and with ``budgeted`` the iteration
-    budget as a last argument (:func:`calib_jax.lm.budget_apart`)."""
+    budget as a last argument (:func:`calib_jax.lm.budget_apart`).
+
+    Two compiled programs: the moment pass (:func:`_compiled_moments`, the only one that sees
+    the samples) and the fit of the 10 x 10 moments, whose shape is the sensor count's alone.
+    As one program every new sample count compiled the whole fit again: 18 compiles of 6-15 s
+    in the test suite (issue 17's profile), and a user's next batch of longer logs paid it
+    again. The moments pass from one to the other on the device."""
     one = _accel_one if kind == "accel" else _mag_one
 
-    def run(raw, valid, ref, *budget):
+    def fit(S, mean, k, ref, *budget):
         opts = dict(options) | ({"max_iter": budget[0]} if budget else {})
-        S, mean, k = _batch_moments(raw, valid)
         params, stderr, status, rms, res, bad = jax.vmap(
             lambda S, m, k, r: one(S, m, k, r, model, solver, opts, min_points)
         )(S, mean, k, ref)
@@ -434,9 +439,29 @@ def _compiled(
 
         mesh = Mesh(np.array(jax.devices()), ("sensors",))
         P = PartitionSpec("sensors")
-        specs = (P, P, P) + (PartitionSpec(),) * budgeted  # the budget: one for all devices
-        run = jax.shard_map(run, mesh=mesh, in_specs=specs, out_specs=P, check_vma=False)
-    return jax.jit(run)
+        specs = (P, P, P, P) + (PartitionSpec(),) * budgeted  # the budget: one for all devices
+        fit = jax.shard_map(fit, mesh=mesh, in_specs=specs, out_specs=P, check_vma=False)
+    fit, moments = jax.jit(fit), _compiled_moments(shard)
+
+    def run(raw, valid, ref, *budget):
+        return fit(*moments(raw, valid), ref, *budget)
+
+    return run
+
+
+@functools.lru_cache(maxsize=2)
+def _compiled_moments(shard: bool):
+    """The batch's moment pass ``(raw, valid) -> (S, mean, k)``, compiled per sample shape."""
+    moments = _batch_moments
+    if shard:
+        from jax.sharding import Mesh, PartitionSpec
+
+        mesh = Mesh(np.array(jax.devices()), ("sensors",))
+        P = PartitionSpec("sensors")
+        moments = jax.shard_map(
+            _batch_moments, mesh=mesh, in_specs=(P, P), out_specs=P, check_vma=False
+        )
+    return jax.jit(moments)
 
 
 def sensor_bucket(n: int, devices: int = 1) -> int:
