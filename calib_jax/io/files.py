@@ -1405,6 +1405,12 @@ def load_log(
     ValueError
         For anything that cannot be read, saying what was found and what to change.
     """
+    if not isinstance(path, str | os.PathLike):  # pathlib's TypeError named no way out
+        raise ValueError(
+            f"load_log reads a file; it was given a {type(path).__name__}. Pass an array or "
+            "DataFrame of readings to calibrate_accel, calibrate_mag or calibrate_gyro "
+            "directly, or build a SensorLog(acc=..., gyro=..., mag=..., t=...)"
+        )
     if sensor not in _SENSORS:
         raise ValueError(f"sensor={sensor!r}: use 'accel', 'mag', 'gyro' or None")
     try:
