@@ -149,6 +149,20 @@ def _slots(effect: str, degree: int = 1) -> tuple[str, ...]:
     return s[: max(1, min(degree, len(s)))] if effect != "soft_iron" else s
 
 
+def _checked_candidates(candidates, allowed: tuple[str, ...]) -> tuple[str, ...]:
+    """``candidates`` as a tuple (one name alone is one candidate: a str was iterated letter by
+    letter, KeyError 'o'), each one of ``allowed`` (a misspelt name was a bare KeyError)."""
+    if isinstance(candidates, str):
+        candidates = (candidates,)
+    unknown = [c for c in candidates if c not in allowed]
+    if unknown:
+        raise ValueError(
+            f"unknown candidate effect(s) {unknown}: this diagnosis tests {list(allowed)} "
+            "(outliers are tested always)"
+        )
+    return tuple(candidates)
+
+
 def _indices(slots: tuple[str, ...]) -> np.ndarray:
     idx = []
     for s in slots:
@@ -1167,7 +1181,13 @@ def _load(data, sensor):
     data = as_log(data)
     if isinstance(data, SensorLog):
         return data.vectors(sensor), data.t, data.temp, data.sample_rate, data.path
-    return np.asarray(data, float), None, None, None, None
+    x = np.asarray(data, float)
+    if x.ndim != 2 or x.shape[1] != 3:  # a (3, N) array read as 3 samples: 'too few samples'
+        raise ValueError(
+            f"data must be (samples, 3), got shape {x.shape}"
+            + ("; transpose it (data.T)" if x.ndim == 2 and x.shape[0] == 3 else "")
+        )
+    return x, None, None, None, None
 
 
 def diagnose_accel(
@@ -1210,6 +1230,7 @@ def diagnose_accel(
     static_options
         Passed to :func:`calib_jax.static.detect_static` (window, threshold_factor, ...).
     """
+    candidates = _checked_candidates(candidates, ACCEL_CANDIDATES)
     x, t_log, temp_log, rate, source = _load(data, "accel")
     t = t_log if t is None else t
     temp = temp_log if temp is None else temp
@@ -1381,6 +1402,7 @@ def diagnose_mag(
     (white) and its Allan deviation at one sample; without a rest, the first-difference noise.
     ``progress``: a bar over the rounds, as in :func:`diagnose_accel`.
     """
+    candidates = _checked_candidates(candidates, MAG_CANDIDATES)
     from ..mag import calibrate_mag
 
     x, t_log, temp_log, rate, source = _load(data, "mag")
