@@ -356,7 +356,9 @@ class AccelCalibration(SensorCalibration):
         """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for one
         reading (3,), many (N, 3), or a loaded log (:class:`calib_jax.io.SensorLog`: its
         ``acc`` columns)."""
-        return apply_params(self.params, _raw_vectors(raw, "accel"))
+        a = apply_params(self.params, _raw_vectors(raw, "accel"))
+        _warn_if_off_scale(a, self.g, f"{self.input_units} (this accelerometer's input)", "g")
+        return a
 
     # ---- report ----------------------------------------------------------------------------
     def __repr__(self) -> str:
@@ -674,6 +676,32 @@ class _Doc:
         return m
 
 
+APPLY_SCALE = (0.5, 2.0)
+"""Calibrated readings whose median magnitude is outside this range of the expected one (g,
+the field) were not in the calibration's input units: an Xsens record (counts) applied to a
+log in g gave |a| about 13.9 g on every row, written without a word."""
+
+
+def _warn_if_off_scale(y: np.ndarray, expected: float, units: str, what: str) -> None:
+    """A warning when 10 or more calibrated readings ``y`` have a median magnitude outside
+    :data:`APPLY_SCALE` of ``expected`` (``what``: "g" or "the field")."""
+    y = np.asarray(y)
+    if y.ndim != 2 or len(y) < 10 or not np.isfinite(expected) or expected <= 0:
+        return
+    n = np.linalg.norm(y, axis=1)
+    med = float(np.median(n[np.isfinite(n)])) if np.isfinite(n).any() else float("nan")
+    lo, hi = APPLY_SCALE
+    if np.isfinite(med) and not lo * expected <= med <= hi * expected:
+        import warnings
+
+        warnings.warn(
+            f"calibrated, these readings have a median magnitude of {med:.4g}, where {what} "
+            f"is {expected:.4g}: they are not in {units}, or not from this sensor; check "
+            "their unit and columns against the calibration's",
+            stacklevel=3,
+        )
+
+
 def _raw_vectors(raw, sensor: str) -> np.ndarray:
     """(3,) or (N, 3) float array from an array or a loaded log's ``sensor`` columns."""
     from .io.files import SensorLog
@@ -830,7 +858,10 @@ class MagCalibration(SensorCalibration):
         accelerometer fit), in host-side numpy; inside JAX use
         :func:`calib_jax.models.mag.compensate`."""
         x = _raw_vectors(raw, self.sensor)
-        return (x - self.center) @ self.soft_iron.T
+        y = (x - self.center) @ self.soft_iron.T
+        what = "g" if self.sensor == "accel" else "the field"
+        _warn_if_off_scale(y, self.radius, f"{self.units or 'the units'} of the fitted log", what)
+        return y
 
     def to_params(self):
         """The calibration as a JAX pytree, :class:`calib_jax.pipeline.MagParams` (c, W) with
