@@ -42,6 +42,24 @@ from .observations import TooFewPoses
 from .status import is_usable, worst_status
 
 
+def _check_accelerometer_unit(tumble_acc, acc) -> None:
+    """A ValueError where the accelerometer's radius (its ellipsoid's, or the readings' median
+    norm without one) is in no accelerometer unit (:data:`calib_jax.accel.UNIT_BANDS`): the
+    two sensors passed the other way round were calibrated, 'ok', with the rotation inverted
+    (a new user's trial; calibrate_accel refuses such readings)."""
+    from .accel import _units_from_norm, no_accelerometer_unit
+
+    x = np.asarray(tumble_acc, float)
+    norm = float(np.nanmedian(np.linalg.norm(x, axis=1)))
+    radius = None if acc is None else float(acc.radius)
+    if _units_from_norm(norm if radius is None else radius) is None:
+        raise ValueError(
+            "tumble_acc: "
+            + no_accelerometer_unit(norm, radius, False, radius is not None)
+            + " (were tumble_acc and tumble_mag passed the other way round?)"
+        )
+
+
 def calibrate_marg(
     tumble_acc: np.ndarray,
     tumble_mag: np.ndarray,
@@ -72,6 +90,7 @@ def calibrate_marg(
     warn: list[str] = []
     mag = calibrate_mag(tumble_mag, model=mag_model)
     acc = calibrate_mag(tumble_acc, model=acc_model, sensor="accel") if acc_ellipsoid else None
+    _check_accelerometer_unit(tumble_acc, acc)
     a_t = np.asarray(tumble_acc, float) if acc is None else acc.apply(tumble_acc)
     rot = align_mag_to_accel(a_t, mag.apply(tumble_mag))
     warn += [f"alignment: {w}" for w in rot.warnings]

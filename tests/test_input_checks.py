@@ -600,3 +600,48 @@ def test_a_log_of_one_face_is_not_told_to_fit_its_samples():
     with pytest.raises(ValueError, match="only 1 distinct pose") as info:
         calibrate_accel(x, sample_rate=100.0)
     assert "--use samples" not in str(info.value) and "use='samples'" not in str(info.value)
+
+
+@pytest.mark.wrong_types
+def test_python_callers_wrong_types_are_named():
+    """Arguments of the wrong type, as a notebook user passes them (the next test says which
+    trial): an array to load_log, one candidate's name as a string."""
+    from calib_jax.diagnose import diagnose_mag
+
+    with pytest.raises(ValueError, match="load_log reads a file; it was given a ndarray"):
+        cj.load_log(np.zeros((5, 3)))
+    with pytest.raises(ValueError, match=r"unknown candidate effect\(s\) \['outliers'\]"):
+        diagnose_mag(_tumble(seed=1), candidates="outliers", progress=False)  # one candidate
+
+
+def test_python_callers_mistakes_are_named():
+    """A new user's notebook (this session's trial of the Python API): load_log given an array
+    raised pathlib's TypeError (the README's comment said it took one); a misspelt diagnosis
+    candidate was a bare KeyError, and one name as a string KeyError 'o' (iterated letter by
+    letter); a (3, N) array was 'too few samples (3 finite)'; a gyro log's time in ms gave 697
+    'poses' of a 38-pose log and a gyro scale of 1e-7 with no word of the time; a calibration
+    applied to readings in another unit gave |a| 13.9 g on every row, silently; calibrate_marg
+    took the magnetometer as the accelerometer."""
+    import warnings
+
+    from calib_jax.diagnose import diagnose_accel, diagnose_mag
+    from calib_jax.simulate import simulate_gyro_log
+
+    x = _tumble(seed=1)
+    with pytest.raises(ValueError, match=r"unknown candidate effect\(s\) \['temperture'\]"):
+        diagnose_accel(x, candidates=("temperture",), progress=False)
+    with pytest.raises(ValueError, match=r"got shape \(3, 2000\); transpose it"):
+        diagnose_mag(x.T, progress=False)
+    s = simulate_gyro_log(6, n_poses=12)
+    with pytest.raises(ValueError, match=r"steps by 10 s \(0.1 Hz\).*milliseconds"):
+        cj.calibrate_gyro(s.acc, s.gyro, t=1000 * s.t)
+    cal = _fit(x)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cal.apply(x)  # its own readings: no warning
+    with pytest.warns(UserWarning, match=r"median magnitude of 5.066e\+04, where the field is 45:"):
+        cal.apply(1000 * x)
+    # the two sensors of calibrate_marg the other way round: 'ok', the rotation inverted
+    tumble = cj.load_log(cj.mag_demo_log_path())
+    with pytest.raises(ValueError, match="radius 0.3086.*passed the other way round"):
+        cj.calibrate_marg(tumble.mag, tumble.acc)
