@@ -358,14 +358,15 @@ def run_batch(args: argparse.Namespace) -> int:
             raise ValueError(f"{r}: no such file or directory")
     dirs = [r for r in roots if r.is_dir()]
     root = roots[0] if len(roots) == 1 else f"{len(roots)} paths"
-    every = sorted(
-        p for d in dirs for p in d.rglob("*") if p.is_file() and not p.name.startswith(".")
-    )
+    held = {  # each folder's files, walked once
+        d: sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith("."))
+        for d in dirs
+    }
+    every = sorted(p for files in held.values() for p in files)
 
     def logs_in(d: Path) -> list[str]:
         if args.pattern is None:
-            found = (p for p in d.rglob("*") if p.is_file() and not p.name.startswith("."))
-            return sorted(str(p) for p in found if p.name.lower().endswith(LOG_SUFFIXES))
+            return [str(p) for p in held[d] if p.name.lower().endswith(LOG_SUFFIXES)]
         return sorted(str(p) for p in d.rglob(args.pattern) if p.is_file())
 
     # in the order given, each file once

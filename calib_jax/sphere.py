@@ -33,9 +33,7 @@ def sphere_coverage(dirs: np.ndarray, cells: int = 100) -> tuple[float, float, n
     """Coverage of unit directions (N, 3): the fraction of ``cells`` equal-area cells (a
     Fibonacci lattice) holding at least one direction, the smallest eigenvalue of the
     direction scatter (1/3 uniform, 0 planar) and its eigenvector (the unseen axis)."""
-    hit = np.count_nonzero(cell_hits(dirs, cells))
-    evals, evecs = np.linalg.eigh(dirs.T @ dirs / len(dirs))
-    return hit / cells, float(evals[0]), evecs[:, 0]
+    return coverage_about(np.asarray(dirs), np.zeros(3), cells=cells)
 
 
 def coverage_about(
@@ -52,7 +50,6 @@ def coverage_about(
     is 260 MB a copy, and calib-jax mag made three). ``cells`` None skips the cell count
     (fraction NaN: the scatter alone, for the one-plane test); ``norms_out`` (N,) receives
     |W (points - centre)|. Non-finite rows give (0.0, NaN, NaN)."""
-    grid = sphere_cells(cells) if cells else None
     hits = np.zeros(cells or 1, np.int64)
     scatter = np.zeros((3, 3))
     finite = True
@@ -67,8 +64,8 @@ def coverage_about(
             finite = False
             continue
         d /= np.maximum(n, 1e-300)[:, None]
-        if grid is not None:
-            hits += np.bincount(np.argmax(d @ grid.T, axis=1), minlength=cells)
+        if cells:
+            hits += cell_hits(d, cells)
         scatter += d.T @ d
     if not finite:
         return 0.0, float("nan"), np.full(3, np.nan)
