@@ -16,9 +16,9 @@ with the samples' degrees of freedom for the covariance.
 
 Per sensor the work is two passes over N samples (about 80 N flops for S) plus a few dozen
 10 x 9 operations per iteration, instead of an (N x 9) Jacobian per iteration. Everything is
-vmapped over sensors with per-member state; a sensor with too few valid samples or with all
-directions in one plane gets its own status (nothing fitted, NaN parameters) and leaves the
-others unchanged.
+vmapped over sensors with per-member state; a sensor with too few valid samples, or whose
+samples sit about one reading or in one plane, gets its own status (nothing fitted, NaN
+parameters) and leaves the others unchanged.
 
 Precision: theta' S theta cancels terms of size N to leave chi2 ~ N sigma^2, so chi2 carries a
 relative round-off of about eps / sigma^2 (1e-10 at sigma = 1e-3 of the radius). The fitted
@@ -45,8 +45,8 @@ from .accel import (
 )
 from .accel import MODELS as ACCEL_MODELS
 from .calibration import BatchRecord
-from .geometry import moments, normalised_moments
-from .linalg import cholesky_small, eigh_small, inv3
+from .geometry import moments, normalised_moments, prefit_status, shell_status
+from .linalg import cholesky_small, det3, inv3
 from .lm import budget_apart, checked_solver_options, lm_solve, with_budget
 from .mag import FLAT_POINTS, ellipsoid_start_moments
 from .models.accel import alpha_matrix
@@ -58,7 +58,7 @@ from .models.mag import (
     raw_covariance,
     unpack,
 )
-from .status import Status, fit_status, is_converged, status_message
+from .status import fit_status, is_converged, status_message
 
 MIN_SAMPLES = 20
 # |g| in the physical units an accelerometer log comes in (counts: any output unit)
@@ -327,23 +327,6 @@ def _unit_sphere_moments(dtype) -> jax.Array:
     return moments(jnp.asarray(d, dtype), jnp.ones(len(d), dtype))
 
 
-def _checks(S, n_params, min_points, flat_below):
-    """Status before fitting, from the moments alone: too few points (fewer than
-    ``min_points``, or than the parameters: as many is an exact fit, as in the single fits),
-    or one plane: the points' covariance (the second moments about their mean) has a smallest
-    to largest eigenvalue ratio below ``flat_below``, the single fit's own threshold
-    (:data:`calib_jax.accel.FLAT_POSES`, :data:`calib_jax.mag.FLAT_POINTS`: a compass turned
-    flat on a table, 0.002, was refused by calib-jax mag and calibrated by the batch at 1e-3)."""
-    n = S[9, 9]
-    scatter = S[6:9, 6:9] / jnp.maximum(n, 1.0)
-    ev, _ = eigh_small(scatter)
-    flat = ev[0] <= flat_below * jnp.maximum(ev[2], 1e-300)
-    too_few = n < max(min_points, n_params)
-    return jnp.where(
-        too_few, int(Status.INSUFFICIENT_DATA), jnp.where(flat, int(Status.NO_COVERAGE), -1)
-    )
-
-
 def _solve(theta_fn, p0, S, dof, solver, options):
     Lt = sqrt_factor(S)
 
@@ -363,7 +346,7 @@ def _solve(theta_fn, p0, S, dof, solver, options):
 def _accel_one(S, mean, k, g, model, solver, options, min_points):
     free = np.asarray(ACCEL_MODELS[model])
     idx = np.flatnonzero(free)
-    pre = _checks(S, len(idx), min_points, FLAT_POSES)
+    pre = prefit_status(S, len(idx), min_points, FLAT_POSES)
     S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = jnp.where(jnp.asarray(free), initial_guess_moments(S), 0.0)
     n = S[9, 9]
@@ -378,11 +361,14 @@ def _accel_one(S, mean, k, g, model, solver, options, min_points):
     params = pn * T + jnp.concatenate([jnp.zeros(6, S.dtype), mean])
     # e = 1 - |a|^2 ~ -2 (|a| - 1): the RMS relative norm error to first order
     rms = jnp.sqrt(res.chi2 / jnp.maximum(n, 1.0)) / 2.0
-    return params, se_n * T, jnp.where(pre >= 0, pre, res.status), rms, res, pre >= 0
+    # the semi-axes in units of the samples' spread k (a unit-radius fit of (x - mean) / k)
+    radius = jnp.cbrt(jnp.abs(det3(alpha_matrix(pn))))
+    status = shell_status(jnp.where(pre >= 0, pre, res.status), rms, radius)
+    return params, se_n * T, status, rms, res, pre >= 0
 
 
 def _mag_one(S, mean, k, field, model, solver, options, min_points):
-    pre = _checks(S, N_PARAMS[model], min_points, FLAT_POINTS)
+    pre = prefit_status(S, N_PARAMS[model], min_points, FLAT_POINTS)
     S = jnp.where(pre >= 0, _unit_sphere_moments(S.dtype), S)
     p0 = ellipsoid_start_moments(S, model)
     n = S[9, 9]
@@ -394,7 +380,8 @@ def _mag_one(S, mean, k, field, model, solver, options, min_points):
     params = jnp.concatenate([center, W.ravel()])
     cov = raw_covariance(res.params, res.covariance, model, mean, k, field)
     stderr = jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
-    return params, stderr, jnp.where(pre >= 0, pre, res.status), rms, res, pre >= 0
+    status = shell_status(jnp.where(pre >= 0, pre, res.status), rms, natural_radius(M_n))
+    return params, stderr, status, rms, res, pre >= 0
 
 
 @functools.lru_cache(maxsize=32)

@@ -67,10 +67,13 @@ class Record:
             )
 
     def __eq__(self, other) -> bool:
-        """Equal records write the same JSON."""
+        """Equal records write the same JSON, but for ``date`` (when the fit ran: two fits
+        of one log a second apart were unequal)."""
         if type(other) is not type(self):
             return NotImplemented
-        return self.to_dict() == other.to_dict()
+        a, b = self.to_dict(), other.to_dict()
+        a.pop("date", None), b.pop("date", None)
+        return a == b
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -84,7 +87,8 @@ class SensorCalibration(Record):
     """What the one-sensor calibrations (accelerometer, ellipsoid, gyroscope) share after
     their own fields: what the fit could not pin down and what to act on, how the way in read
     the file, who and when; ``success`` from the status word and ``==`` field by field
-    (arrays with numpy.array_equal, NaN equal to NaN). Keyword-only in the constructors."""
+    (arrays with numpy.array_equal, NaN equal to NaN), ``date`` left out: two fits of one log
+    are equal whenever they ran. Keyword-only in the constructors."""
 
     poorly_determined: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -273,6 +277,7 @@ class AccelCalibration(SensorCalibration):
         behind it: standard errors, covariance and errors are NaN, the solver is 'params' and
         the status 'ok' says only that the gains are finite and invertible (a note says so; a
         ValueError otherwise, as on loading a file)."""
+        _check_params_kind(params, "AccelParams", "AccelCalibration")
         vec = params.to_vector() if hasattr(params, "to_vector") else params
         p = np.array(vec, float).reshape(-1)
         if p.shape != (9,) or not np.all(np.isfinite(p)):
@@ -318,20 +323,40 @@ class AccelCalibration(SensorCalibration):
         (N, 3) readings it was fitted to, ``g`` the magnitude it was given, ``units`` the
         readings' unit and ``output_units`` the calibrated one (by default as
         :func:`calib_jax.calibrate_accel` has it: g for counts, else the input unit; the
-        exports scale by it). The status is the solver's: a pipeline fit has no pose
-        detection, coverage or plausibility checks (a note says so; give ``calibrate_accel``
-        the log for them)."""
+        exports scale by it). The status is the solver's (the fit refuses too few rows, a
+        sensor held still and poses in one plane), made "failed" where the gains are no
+        accelerometer's (:func:`calib_jax.accel.implausible_gains`, the single fit's rule);
+        there is no pose detection or coverage report (give ``calibrate_accel`` the log)."""
         p = np.asarray(fit.params.to_vector(), float)
         cov = np.asarray(fit.covariance, float)
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = cov / np.outer(se, se)
+        from .accel import implausible_gains
+        from .geometry import NO_SHELL
+
         x = np.asarray(points, float)
+        x = x[np.all(np.isfinite(x), axis=1)]  # the rows the fit used (it masks the others)
         a = apply_params(p, x)
         g = float(g)
         norm = np.linalg.norm(x, axis=1)
+        outcome = pipeline_outcome(fit, "pipeline.fit_accel", bool(np.all(np.isfinite(p))))
+        # the single fit's rule on the gains, in units of the points' scale (motion taken for
+        # poses gave "converged" with gains of 7,978)
+        r = float(norm.mean()) if len(norm) else float("nan")
+        implausible = implausible_gains(p / np.concatenate([np.full(6, r / g), np.full(3, r)]))
+        rms_after = float(np.sqrt(np.mean((np.linalg.norm(a, axis=1) / g - 1.0) ** 2)))
+        if not implausible and not rms_after <= NO_SHELL:  # a g the fit was not given
+            implausible = (
+                f"the calibrated points miss g = {g:g} by {rms_after:.3g} RMS (relative), "
+                f"above {NO_SHELL:g}, where the fit's own residual is {float(fit.rms):.3g} of "
+                "its magnitude: give from_fit the magnitude the fit was given, and the points "
+                "it was fitted to"
+            )
+        if implausible and outcome["status"] in ("ok", "not_converged"):
+            outcome["status"] = "failed"
         return cls(
-            **pipeline_outcome(fit, "pipeline.fit_accel", bool(np.all(np.isfinite(p)))),
+            **outcome,
             params=p,
             stderr=se,
             covariance=cov,
@@ -344,9 +369,13 @@ class AccelCalibration(SensorCalibration):
             n_intervals=0,
             n_points=len(x),
             rms_before=float(np.sqrt(np.mean((norm / norm.mean() - 1.0) ** 2))),
-            rms_after=float(np.sqrt(np.mean((np.linalg.norm(a, axis=1) / g - 1.0) ** 2))),
+            rms_after=rms_after,
             noise_floor=float("nan"),
-            notes=["from calib_jax.pipeline.fit_accel: no pose detection or plausibility checks"],
+            warnings=[implausible] if implausible else [],
+            notes=[
+                "from calib_jax.pipeline.fit_accel: no pose detection; the gains' plausibility "
+                "checked, the coverage only as the fit does (one plane, one reading)"
+            ],
             static_means=x,
             sensor_id=sensor_id,
             source=source,
@@ -354,8 +383,8 @@ class AccelCalibration(SensorCalibration):
 
     def apply(self, raw) -> np.ndarray:
         """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for one
-        reading (3,), many (N, 3), or a loaded log (:class:`calib_jax.io.SensorLog`: its
-        ``acc`` columns)."""
+        reading (3,), many (N, 3), or a loaded log or a log's path (its ``acc`` columns; to
+        write a corrected file, :func:`calib_jax.apply.apply_calibration`)."""
         a = apply_params(self.params, _raw_vectors(raw, "accel"))
         _warn_if_off_scale(a, self.g, f"{self.input_units} (this accelerometer's input)", "g")
         return a
@@ -682,30 +711,54 @@ the field) were not in the calibration's input units: an Xsens record (counts) a
 log in g gave |a| about 13.9 g on every row, written without a word."""
 
 
-def _warn_if_off_scale(y: np.ndarray, expected: float, units: str, what: str) -> None:
-    """A warning when 10 or more calibrated readings ``y`` have a median magnitude outside
-    :data:`APPLY_SCALE` of ``expected`` (``what``: "g" or "the field")."""
+def off_scale(y: np.ndarray, expected: float, units: str, what: str) -> str | None:
+    """Why 10 or more calibrated readings ``y`` are not in the calibration's input units (a
+    median magnitude outside :data:`APPLY_SCALE` of ``expected``; ``what``: "g" or "the
+    field"), None when they may be: the rule of ``apply`` on arrays and on files."""
     y = np.asarray(y)
     if y.ndim != 2 or len(y) < 10 or not np.isfinite(expected) or expected <= 0:
-        return
+        return None
     n = np.linalg.norm(y, axis=1)
     med = float(np.median(n[np.isfinite(n)])) if np.isfinite(n).any() else float("nan")
     lo, hi = APPLY_SCALE
-    if np.isfinite(med) and not lo * expected <= med <= hi * expected:
+    if not np.isfinite(med) or lo * expected <= med <= hi * expected:
+        return None
+    return (
+        f"calibrated, these readings have a median magnitude of {med:.4g}, where {what} is "
+        f"{expected:.4g}: they are not in {units}, or not from this sensor; check their unit "
+        "and columns against the calibration's"
+    )
+
+
+def _warn_if_off_scale(y: np.ndarray, expected: float, units: str, what: str) -> None:
+    """A UserWarning with :func:`off_scale`'s finding, if any."""
+    why = off_scale(y, expected, units, what)
+    if why:
         import warnings
 
-        warnings.warn(
-            f"calibrated, these readings have a median magnitude of {med:.4g}, where {what} "
-            f"is {expected:.4g}: they are not in {units}, or not from this sensor; check "
-            "their unit and columns against the calibration's",
-            stacklevel=3,
+        warnings.warn(why, stacklevel=3)
+
+
+def _check_params_kind(params, wanted: str, record: str) -> None:
+    """A ValueError for a pipeline Fit, or another sensor's parameters, given to a
+    ``from_params`` (they were float()'s TypeError)."""
+    kind = type(params).__name__
+    if kind == "Fit":
+        raise ValueError(
+            f"{record}.from_params takes the parameters; a pipeline Fit becomes a record with "
+            f"{record}.from_fit(fit, points, ...), or give fit.params"
         )
+    if kind.endswith("Params") and kind != wanted:
+        raise ValueError(f"{record}.from_params takes {wanted}, got {kind} (another sensor's)")
 
 
 def _raw_vectors(raw, sensor: str) -> np.ndarray:
-    """(3,) or (N, 3) float array from an array or a loaded log's ``sensor`` columns."""
-    from .io.files import SensorLog
+    """(3,) or (N, 3) float array from an array, or the ``sensor`` columns of a loaded log or
+    of a log file (read with :func:`calib_jax.load_log`)."""
+    from .io.files import SensorLog, load_log
 
+    if isinstance(raw, (str, os.PathLike)):  # was "could not convert string to float"
+        raw = load_log(raw, sensor=sensor)
     x = raw.vectors(sensor) if isinstance(raw, SensorLog) else np.asarray(raw, float)
     if x.ndim not in (1, 2) or x.shape[-1] != 3:
         raise ValueError(
@@ -740,7 +793,11 @@ def _selection_flag(v: dict) -> str:
 def _fields_equal(a, b):
     if type(a) is not type(b):
         return NotImplemented
-    return all(_value_equal(getattr(a, f.name), getattr(b, f.name)) for f in _dc.fields(a))
+    return all(
+        _value_equal(getattr(a, f.name), getattr(b, f.name))
+        for f in _dc.fields(a)
+        if f.name != "date"  # when the fit ran, not what it found
+    )
 
 
 @contextlib.contextmanager
@@ -854,8 +911,8 @@ class MagCalibration(SensorCalibration):
 
     def apply(self, raw) -> np.ndarray:
         """Calibrated vectors W (raw - center) for one reading (3,), many (N, 3), or a loaded
-        log (:class:`calib_jax.io.SensorLog`: its ``mag`` columns, ``acc`` for an
-        accelerometer fit), in host-side numpy; inside JAX use
+        log or a log's path (its ``mag`` columns, ``acc`` for an accelerometer fit), in
+        host-side numpy; inside JAX use
         :func:`calib_jax.models.mag.compensate`."""
         x = _raw_vectors(raw, self.sensor)
         y = (x - self.center) @ self.soft_iron.T
@@ -891,6 +948,7 @@ class MagCalibration(SensorCalibration):
         :func:`calibrate_mag` record's ``radius``). No fit stands behind it: standard errors
         and errors are NaN, the solver 'params', the status 'ok' only says W is finite and
         invertible (a note says so; a ValueError otherwise)."""
+        _check_params_kind(params, "MagParams", "MagCalibration")
         c = np.array(params.hard_iron, float).reshape(-1)
         W = np.array(params.soft_iron, float)
         if c.shape != (3,) or W.shape != (3, 3) or not np.all(np.isfinite(W)):

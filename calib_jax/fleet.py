@@ -171,25 +171,32 @@ def _judge_mag(entry: dict, pts: np.ndarray, se_n: np.ndarray, options: dict) ->
     a 14 % radial error that calib-jax mag calls failed, 'do not use'). The status, the
     warnings and, for a downgraded entry, its message."""
     from .mag import POORLY_DETERMINED, judge_fit, poorly_determined
-    from .status import is_usable
+    from .status import Status, is_usable, worst_status
 
-    if not is_usable(entry["status"]):
+    # fitted, then refused by the batch's own shell checks (NO_SHELL, RAN_AWAY): the single
+    # fit's judgement still gives the words and warnings calib-jax mag would
+    refused = entry.get("solver_status") in (Status.NO_SHELL, Status.RAN_AWAY)
+    if not is_usable(entry["status"]) and not refused:
         return {}
     p = np.asarray(entry["params"], float)
     centre, W = p[:3], p[3:].reshape(3, 3)
     radius = _mag_norms(p, pts, options)[1]
     model = options.get("model") or "full"
-    status, warn = entry["status"], []
+    status, warn = ("ok" if refused else entry["status"]), []
     poor = poorly_determined(se_n, model)
     if status == "ok" and poor:
         status = "poorly_determined"
         warn.append(POORLY_DETERMINED.format(", ".join(poor)))
     judged, more = judge_fit(pts, centre, W, status, model, radius)
     warn += more
+    if refused:  # never better than the batch's verdict
+        judged = worst_status(judged, entry["status"])
     out: dict = {"status": judged, "warnings": warn}
     if poor:
         out["poorly_determined"] = poor
-    if judged != entry["status"]:  # the message says why: the last check that downgraded it
+    if refused and more:
+        out["message"] = more[-1]
+    elif judged != entry["status"]:  # the message says why: the last check that downgraded it
         out["message"] = more[-1] if judged != status and more else warn[0]
     return out
 

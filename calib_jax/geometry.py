@@ -9,6 +9,7 @@ import numpy as np
 from .linalg import cho_solve_small, eigh_small, inv3
 from .padding import pad_rows
 from .runtime import disk_jit
+from .status import Status
 
 # The 35 monomials x^a y^b z^c of degree <= 4, each built from an earlier one times x, y or z;
 # the moment matrix gathers them: phi_i phi_j is the monomial of the summed exponents.
@@ -117,6 +118,51 @@ def normalised_moments(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array
     k = jnp.sqrt(square / n)
     k = jnp.where(k > 0, k, 1.0)
     return moments_from_power_sums(P, k), mean, k
+
+
+NO_SHELL = 0.12
+"""A fit whose relative RMS radial error is above this describes no ellipsoid shell: the
+samples are a noise cloud (a sensor held still, 28-39 %), motion, or a field that changed (a
+hard iron jumping by 2/3 of the field, 15 %); a tumble reaches 0.5-2 %. The single fits
+(calib_jax.mag.RMS_NO_SHELL_PCT), the batch and the pipeline (:func:`shell_status`)."""
+
+
+def prefit_status(S, n_params: int, min_points: int, flat_below: float):
+    """The status before a moment-form or pipeline fit, inside jit: INSUFFICIENT_DATA for fewer
+    valid points than ``min_points`` or than the parameters (as many is an exact fit, as in the
+    single fits); NO_COVERAGE for points in one plane, whose covariance (S's second moments
+    of the centred samples, :func:`normalised_moments`) has a smallest to largest eigenvalue
+    ratio below ``flat_below`` (the single fits' own thresholds,
+    :data:`calib_jax.accel.FLAT_POSES` and :data:`calib_jax.mag.FLAT_POINTS`); -1 otherwise."""
+    n = S[9, 9]
+    scatter = S[6:9, 6:9] / jnp.maximum(n, 1.0)
+    ev, _ = eigh_small(scatter)
+    flat = ev[0] <= flat_below * jnp.maximum(ev[2], 1e-300)
+    too_few = n < max(min_points, n_params)
+    return jnp.where(
+        too_few,
+        int(Status.INSUFFICIENT_DATA),
+        jnp.where(flat, int(Status.NO_COVERAGE), -1),
+    )
+
+
+RUNAWAY = 10.0
+"""A fitted ellipsoid whose geometric-mean radius is this many times the samples' RMS spread
+about their mean ran away: a cap of data too small (one pose held still, or a few close
+together) lets any large ellipsoid through it. A tumble's ratio is about 1 (the single
+magnetometer fit, calib_jax.mag; the batch and the pipeline, :func:`shell_status`)."""
+
+
+def shell_status(status, rms_relative, radius_over_spread):
+    """A fit's status with NO_SHELL where its relative RMS radial error is above
+    :data:`NO_SHELL`, and RAN_AWAY where its ellipsoid is over :data:`RUNAWAY` times the
+    samples' spread (inside jit). A fit refused before it ran keeps its code (its RMS is NaN,
+    or that of the stand-in the batch fits)."""
+    refused = (status == int(Status.INSUFFICIENT_DATA)) | (status == int(Status.NO_COVERAGE))
+    refused |= status == int(Status.FAILED)
+    code = jnp.where(rms_relative > NO_SHELL, int(Status.NO_SHELL), status)
+    code = jnp.where(radius_over_spread < RUNAWAY, code, int(Status.RAN_AWAY))
+    return jnp.where(refused, status, code).astype(jnp.asarray(status).dtype)
 
 
 def centre_and_scale(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:

@@ -41,6 +41,8 @@ import numpy as np
 
 from .calibration import FitStatusWarning, MagCalibration, ellipsoid_axes
 from .geometry import (
+    NO_SHELL,
+    RUNAWAY,
     ellipsoid_fit_constrained_moments,
     moments,
     sphere_fit_moments,
@@ -106,9 +108,6 @@ FLAT = 0.01
 # centre a noisy circle's directions look like a cone (uBot's robot turning on the floor:
 # 0.0022 here, a 17-degree cap about 0.005)
 FLAT_POINTS = 0.005
-# a fitted mean radius this many times the data's RMS radius means the ellipsoid ran away
-# (partial coverage lets a huge ellipsoid pass through a cap of data)
-RUNAWAY = 10.0
 # plausibility of the RMS radial error after the fit (percent of the field), from real logs:
 # clean magnetometer tumbles reach 0.5-2 % (CK-Explorer 1.26 %, BROAD 1.5-1.9 %), the noisy
 # QMC5883L log 6.2 % (all of it sample-to-sample noise: 5.6 %), BROAD trial 34 with a magnet
@@ -123,7 +122,7 @@ RMS_PLAUSIBLE_PCT = 5.0
 NOISE_RATIO = 2.0
 # above this no ellipsoid describes the data (a noise cloud 28-39 %, a hyperboloid 28-46 %,
 # a hard iron jumping by 2/3 of the field 15 %): "failed"
-RMS_NO_SHELL_PCT = 12.0
+RMS_NO_SHELL_PCT = 100 * NO_SHELL
 # largest / smallest semi-axis: soft iron this strong is not a magnetometer (QMC5883L 2.2,
 # the strongest of the real logs; others 1.03-1.4)
 AXES_RATIO = 4.0

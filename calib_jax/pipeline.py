@@ -59,18 +59,19 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int, Real
 
-from .accel import fit_normalized
+from .accel import FLAT_POSES, fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
-from .geometry import centre_and_scale
+from .geometry import centre_and_scale, moments, prefit_status, shell_status
 from .gyro import _angles, _pad_motions, _pose_log, start_scale
 from .implicit import solve_implicit
-from .mag import fit_ellipsoid_normalized
+from .linalg import det3
+from .mag import FLAT_POINTS, fit_ellipsoid_normalized
 from .models.accel import AccelParams
 from .models.gyro import GyroParams, Motions, gravity_residual
-from .models.mag import natural_radius, raw_calibration, raw_covariance, unpack
+from .models.mag import N_PARAMS, natural_radius, raw_calibration, raw_covariance, unpack
 from .padding import bucket, stack_rows
 from .rotations import euler_zyx_deg, rotvec_to_dcm
-from .status import CONVERGED_STATUSES, Status
+from .status import CONVERGED_STATUSES, Status, status_message
 
 __all__ = [
     "AccelParams",
@@ -232,6 +233,12 @@ class Fit(eqx.Module):
         return jnp.isin(self.status, jnp.asarray([int(c) for c in CONVERGED_STATUSES]))
 
     @property
+    def message(self) -> str:
+        """The status in words, for one concrete fit (host side; ``status`` is the code):
+        :func:`calib_jax.lm.status_message`."""
+        return status_message(int(self.status))
+
+    @property
     def stderr(self) -> jax.Array:
         """Standard errors in the order of ``covariance``."""
         return jnp.sqrt(jnp.diagonal(self.covariance, axis1=-2, axis2=-1))
@@ -261,12 +268,15 @@ def _prepare(raw, magnitude, weights):
             f"magnitude must be a scalar for one sensor, got shape {g.shape} (fit_batch takes "
             "one per sensor)"
         )
-    return raw, g, w
+    # a row with a NaN or inf is masked out (weight 0, read as 0), as in the batch: one such
+    # row made the whole fit NONFINITE
+    finite = jnp.all(jnp.isfinite(raw), axis=1)
+    return jnp.where(finite[:, None], raw, 0.0), g, jnp.where(finite, w, 0.0)
 
 
 def _magnitude_ok(g: jax.Array):
     """A concrete magnitude must be positive and finite (ValueError naming it); a traced one
-    (under jit, vmap or grad) cannot raise: returns the traced test, which :func:`_fail_if`
+    (under jit, vmap or grad) cannot raise: returns the traced test, which :func:`_refusal`
     turns into status FAILED with NaN parameters. Concrete: returns True."""
     if isinstance(g, jax.core.Tracer):
         return jnp.isfinite(g) & (g > 0)
@@ -278,13 +288,35 @@ def _magnitude_ok(g: jax.Array):
     return True
 
 
-def _fail_if(fit: Fit, ok) -> Fit:
-    """Under jit: a non-positive or non-finite magnitude gives status FAILED, NaN params."""
-    if ok is True:
-        return fit
-    nan_params = jax.tree.map(lambda a: jnp.where(ok, a, jnp.nan), fit.params)
-    status = jnp.where(ok, fit.status, int(Status.FAILED)).astype(fit.status.dtype)
-    return eqx.tree_at(lambda f: (f.params, f.status), fit, (nan_params, status))
+def _refusal(g_ok, x, w, n_params: int, flat_below: float):
+    """The status code that refuses a fit before it runs, -1 for none (under jit): FAILED for a
+    traced magnitude that is not positive and finite (``g_ok``, :func:`_magnitude_ok`), else
+    :func:`calib_jax.geometry.prefit_status` of the centred samples ``x`` (too few valid ones;
+    one plane), the batch's own checks."""
+    pre = prefit_status(moments(x, w), n_params, 10, flat_below)
+    return pre if g_ok is True else jnp.where(g_ok, pre, int(Status.FAILED))
+
+
+def _stand_in(x, w, code):
+    """Unit-sphere points in place of refused samples, so that the solve that runs anyway
+    under jit is well posed and short (the batch substitutes unit-sphere moments)."""
+    n = x.shape[0]
+    k = np.arange(n) + 0.5  # a Fibonacci sphere: n directions spread evenly
+    z = 1.0 - 2.0 * k / n
+    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    d = jnp.asarray(np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), x.dtype)
+    refused = code >= 0
+    return jnp.where(refused, d, x), jnp.where(refused, 1.0, w)
+
+
+def _refuse(fit: Fit, code) -> Fit:
+    """The fit with status ``code`` and NaN params and rms where ``code`` >= 0."""
+    refused = code >= 0
+    nan_params = jax.tree.map(lambda a: jnp.where(refused, jnp.nan, a), fit.params)
+    status = jnp.where(refused, code, fit.status).astype(fit.status.dtype)
+    rms = jnp.where(refused, jnp.nan, fit.rms)
+    return eqx.tree_at(lambda f: (f.params, f.status, f.rms), fit, (nan_params, status, rms))
 
 
 def _float_dtype(raw: jax.Array):
@@ -292,10 +324,14 @@ def _float_dtype(raw: jax.Array):
     return raw.dtype if jnp.issubdtype(raw.dtype, jnp.floating) else jnp.float64
 
 
-def _finish(params, res, cov, raw, w, magnitude):
+def _finish(params, res, cov, raw, w, magnitude, radius):
+    """The Fit, its status judged as the batch's (:func:`calib_jax.geometry.shell_status`:
+    a noise cloud fits no shell; an ellipsoid ``radius`` times the samples' spread ran
+    away)."""
     e = residual(params, raw, magnitude)
     rms = jnp.sqrt(jnp.sum(w * e * e) / jnp.sum(w))
-    return Fit(params=params, covariance=cov, status=res.status, rms=rms, iterations=res.iterations)
+    status = shell_status(res.status, rms / magnitude, radius)
+    return Fit(params=params, covariance=cov, status=status, rms=rms, iterations=res.iterations)
 
 
 @_full_float32
@@ -323,8 +359,9 @@ def fit_accel(
         ``jit`` / ``vmap`` (a traced value) the Fit instead has status
         :attr:`calib_jax.lm.Status.FAILED` (``converged`` False) and NaN ``params``.
     weights : (N,), optional
-        Per-sample weights (0 masks a sample out). Differentiable. With
-        ``absolute_sigma=True`` they are 1 / sigma^2, sigma the noise of |a| / g.
+        Per-sample weights (0 masks a sample out; so does a NaN or inf in the row).
+        Differentiable. With ``absolute_sigma=True`` they are 1 / sigma^2, sigma the noise of
+        |a| / g.
     update_type, max_iter : static
         Paper 1's lambda scheme (1, 2, 3) and the iteration budget.
 
@@ -332,10 +369,15 @@ def fit_accel(
     -------
     Fit
         Its ``params`` (:class:`AccelParams`) are differentiable in ``raw``, ``magnitude``
-        and ``weights`` by the implicit function theorem. Jittable and vmappable (see
+        and ``weights`` by the implicit function theorem. Data that cannot determine the
+        model are refused before the fit, with NaN ``params`` and ``rms``, by the batch's
+        checks (:func:`calib_jax.geometry.prefit_status`): status INSUFFICIENT_DATA for fewer
+        than 10 valid rows, NO_COVERAGE for a sensor held still or poses in one plane.
+        Jittable and vmappable (see
         :func:`fit_batch`); one compile per (N, dtype, static options), also when called
         eagerly (the fit is jitted inside).
     """
+    _check_readings(raw, "fit_accel")
     _check_magnitude(magnitude)
     return _fit_accel(
         raw,
@@ -345,6 +387,22 @@ def fit_accel(
         max_iter=max_iter,
         absolute_sigma=absolute_sigma,
     )
+
+
+def _check_readings(raw, fit: str) -> None:
+    """A ValueError for a path or a loaded log where the pure fits take an array (jit's own
+    error said the argument was not "marked as static")."""
+    import os
+
+    from .io.files import SensorLog
+
+    if isinstance(raw, (str, os.PathLike, SensorLog)):
+        raise ValueError(
+            f"{fit} takes an (N, 3) array of readings, got a {type(raw).__name__}: load the log "
+            "first (load_log(path).acc, or the static means calibrate_accel fits: "
+            "calib_jax.observations.accel_observations(log.acc).points), or give the file to "
+            "calib_jax.calibrate_accel / calibrate_mag, which do"
+        )
 
 
 def _check_magnitude(magnitude) -> None:
@@ -362,12 +420,14 @@ def _fit_accel(raw, magnitude, weights, *, update_type, max_iter, absolute_sigma
     g_ok = _magnitude_ok(g)
     m, s = _normalisation(raw, w)
     x = (raw - m) / s
+    code = _refusal(g_ok, x, w, 9, FLAT_POSES)
+    x, w_fit = _stand_in(x, w, code)
     # calibrate_accel's fit (one minimiser on every path). Its residual 1 - |a|^2 / g^2 is
     # twice 1 - |a| / g to first order: weights w / 4 (exact in binary) keep w meaning
     # 1 / sigma^2 of |a| / g, as in fit_mag
     res = fit_normalized(
         x,
-        w / 4.0,
+        w_fit / 4.0,
         solver=f"lm{update_type}",
         g=g,
         implicit=True,
@@ -379,7 +439,9 @@ def _fit_accel(raw, magnitude, weights, *, update_type, max_iter, absolute_sigma
     p = jnp.concatenate([s * pn[:6], s * pn[6:] + m])
     params = AccelParams.from_vector(p)
     cov = s * s * res.covariance
-    return _fail_if(_finish(params, res, cov, raw, w, g), g_ok)
+    # the semi-axes g eig(alpha) of the normalised fit, in units of the spread s
+    radius = g * jnp.cbrt(jnp.abs(det3(params.alpha / s)))
+    return _refuse(_finish(params, res, cov, raw, w, g, radius), code)
 
 
 @_full_float32
@@ -405,10 +467,13 @@ def fit_mag(
     status FAILED and NaN ``params`` under ``jit``). ``model`` (static): "full" (9
     parameters), "diag" (an axis-aligned ellipsoid) or "sphere" (hard iron only). With
     ``absolute_sigma=True`` the weights are 1 / sigma^2, sigma the noise of |W (m' - c)| / B.
+    Rows with a NaN or inf are masked out, and data that cannot determine the model are refused
+    as in :func:`fit_accel` (INSUFFICIENT_DATA, NO_COVERAGE; NaN ``params``).
     Returns a :class:`Fit` with :class:`MagParams`, differentiable in ``raw``, ``magnitude``
     and ``weights``; jittable and vmappable. Needs a well-covered sphere of orientations (see
     :func:`calib_jax.calibrate_mag` for the coverage checks and the model choice).
     """
+    _check_readings(raw, "fit_mag")
     _check_magnitude(magnitude)
     return _fit_mag(
         raw,
@@ -427,9 +492,11 @@ def _fit_mag(raw, magnitude, weights, *, model, update_type, max_iter, absolute_
     B_ok = _magnitude_ok(B)
     m, s = _normalisation(raw, w)
     x = (raw - m) / s
+    code = _refusal(B_ok, x, w, N_PARAMS[model], FLAT_POINTS)
+    x, w_fit = _stand_in(x, w, code)
     res = fit_ellipsoid_normalized(
         x,
-        w,
+        w_fit,
         model,
         solver=f"lm{update_type}",
         implicit=True,
@@ -447,7 +514,8 @@ def _fit_mag(raw, magnitude, weights, *, model, update_type, max_iter, absolute_
         # of the fit with the weights as given
         r = natural_radius(unpack(res.params, model)[1])
         cov = 4.0 * jax.lax.stop_gradient(r) ** 2 * cov
-    return _fail_if(_finish(params, res, cov, raw, w, B), B_ok)
+    radius = natural_radius(unpack(res.params, model)[1])  # in units of the spread s
+    return _refuse(_finish(params, res, cov, raw, w, B, radius), code)
 
 
 @_full_float32

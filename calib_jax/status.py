@@ -35,9 +35,19 @@ class Status(enum.IntEnum):
     precision, though the absolute tests 1-3 did not trigger (typical with many samples,
     where the gradient at the optimum is dominated by round-off)."""
     INSUFFICIENT_DATA = 9
-    """Batch fits: too few valid samples for the model (checked inside jit; nothing fitted)."""
+    """Batch and pipeline fits: too few valid samples for the model (checked inside jit;
+    nothing fitted)."""
     NO_COVERAGE = 10
-    """Batch fits: the valid samples lie in one plane of directions; nothing fitted."""
+    """Batch and pipeline fits: the valid samples lie in one plane of directions; nothing
+    fitted."""
+    NO_SHELL = 11
+    """Batch and pipeline fits: fitted, but the RMS radial error is above
+    :data:`calib_jax.geometry.NO_SHELL`: the samples lie on no ellipsoid shell (a sensor held
+    still, motion, a field that changed); no calibration."""
+    RAN_AWAY = 12
+    """Batch and pipeline fits: fitted, but the ellipsoid is over
+    :data:`calib_jax.geometry.RUNAWAY` times the samples' spread: a cap of data too small
+    (one pose held still) lets any large ellipsoid through; no calibration."""
 
 
 CONVERGED_STATUSES = (
@@ -74,6 +84,17 @@ _MESSAGES = {
     ),
     Status.NO_COVERAGE: (
         "not fitted: the samples' directions lie in one plane; record more orientations"
+    ),
+    Status.NO_SHELL: (
+        "no calibration: the samples lie on no ellipsoid shell (RMS radial error above 12 %): "
+        "a sensor held still (a noise cloud), motion, or a field that changed during the "
+        "recording; record a tumble through all orientations"
+    ),
+    Status.RAN_AWAY: (
+        "no calibration: the fitted ellipsoid is over 10 times the samples' spread, so the "
+        "samples cover too small a cap of directions (one pose held still, or a few close "
+        "together) and any large ellipsoid passes through them; record poses or a tumble "
+        "through all orientations"
     ),
 }
 
@@ -123,6 +144,6 @@ def fit_status(status: int, usable: bool = True) -> str:
     non-finite, singular, an external failure, or ``usable`` False), "not_converged" (the
     budget ran out) or "ok"; callers refine "ok" to "poorly_determined"."""
     bad = (Status.NONFINITE, Status.SINGULAR, Status.FAILED, Status.INSUFFICIENT_DATA)
-    if int(status) in bad or int(status) == Status.NO_COVERAGE or not usable:
+    if int(status) in bad + (Status.NO_COVERAGE, Status.NO_SHELL, Status.RAN_AWAY) or not usable:
         return "failed"
     return "ok" if is_converged(status) else "not_converged"

@@ -74,15 +74,20 @@ def test_bad_sensors_get_their_own_status_and_leave_the_others_bit_identical():
     flat = raw[:1].copy()
     flat[..., 2] = 0.3  # every direction in one plane
     few = raw[:1].copy()
-    mask = np.ones((S + 3, N), bool)
+    # a board held still: the fit ran out of iterations through its noise cloud
+    # (not_converged), to an ellipsoid far larger than the cloud (the magnetometer's: "ok")
+    still = raw[:1, :1] + 1e-3 * np.random.default_rng(9).normal(size=(1, N, 3))
+    mask = np.ones((S + 4, N), bool)
     mask[S + 2, 10:] = False  # 10 valid samples
-    r = calibrate_accel_batch(np.concatenate([raw, nan, flat, few]), mask)
+    r = calibrate_accel_batch(np.concatenate([raw, nan, flat, few, still]), mask)
     assert np.asarray(r.status)[S:].tolist() == [
         Status.INSUFFICIENT_DATA,
         Status.NO_COVERAGE,
         Status.INSUFFICIENT_DATA,
+        Status.RAN_AWAY,
     ]
-    assert np.all(np.isnan(np.asarray(r.params)[S:]))
+    assert np.all(np.isnan(np.asarray(r.params)[S : S + 3]))
+    assert r.statuses[S + 3] == "failed"
     for field in ("params", "stderr", "status", "rms", "chi2", "iterations"):
         a = np.asarray(getattr(r, field))[:S]
         b = np.asarray(getattr(good, field))

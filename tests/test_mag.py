@@ -520,6 +520,11 @@ def test_a_noisy_turn_about_one_axis_is_rejected_too():
     from calib_jax.lm import Status
 
     assert int(calibrate_mag_batch(x[None]).status[0]) == Status.NO_COVERAGE
+    # and the same magnetometer held still (noise 0.6 per axis about a reading of length 81):
+    # the batch fitted a sphere to the noise ball and called it "ok"; calibrate_mag says the
+    # field "barely changes"
+    still = [-56.0, -59.0, -1.0] + 0.6 * rng.normal(size=x.shape)
+    assert int(calibrate_mag_batch(still[None]).status[0]) == Status.NO_SHELL
 
 
 def test_the_uncentred_before_is_left_out_where_the_offset_dwarfs_the_field():

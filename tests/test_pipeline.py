@@ -4,6 +4,7 @@ Monte Carlo, float32 and float64."""
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -134,6 +135,44 @@ def test_fit_accel_is_calibrate_accel(sim48):
     dp = np.asarray(f.params.to_vector()) - cal.params
     assert np.all(np.abs(dp) < 1e-5 * cal.stderr), dp / cal.stderr
     np.testing.assert_allclose(np.asarray(f.stderr), cal.stderr, rtol=1e-8)
+
+
+def test_a_sensor_held_still_is_refused_and_a_nan_row_is_masked(fits):
+    """The batch's checks, inside jit. One pose held still was fitted through its noise cloud
+    (fit_mag: converged; fit_accel: gains of 1.0-1.6 from 1e-3 g of noise). The magnetometer's
+    sphere through the cloud is now NO_SHELL (its RMS radial error far above
+    calib_jax.geometry.NO_SHELL, 12 %), the accelerometer's ellipsoid about 1,000 times the
+    cloud's spread RAN_AWAY (calib_jax.geometry.RUNAWAY, 10). Poses in one plane
+    are NO_COVERAGE before the fit, with NaN parameters. A row with a NaN made the whole fit
+    NONFINITE; it is masked out as in the batch, so the fit equals the fit with that row's
+    weight 0 (the same arithmetic: to round-off)."""
+    rng = np.random.default_rng(11)
+    Status = cj.lm.Status
+    # the shapes of `fits`: no new compilation
+    for fit, raw, code in ((FIT_A, ACC, Status.RAN_AWAY), (FIT_M, MAG, Status.NO_SHELL)):
+        still = raw[0] + 1e-3 * rng.normal(size=raw.shape)
+        f = fit(jnp.asarray(still), 1.0)
+        assert int(f.status) == code and not bool(f.converged)
+        assert f.message.startswith("no calibration:"), f.message
+        record = cj.AccelCalibration if fit is FIT_A else cj.MagCalibration
+        assert record.from_fit(f, still, 1.0).status == "failed"
+        flat = raw.copy()
+        flat[:, 2] = 0.3
+        f = fit(jnp.asarray(flat), 1.0)
+        assert int(f.status) == cj.lm.Status.NO_COVERAGE
+        assert np.all(np.isnan(ravel_pytree(f.params)[0])) and np.isnan(float(f.rms))
+    bad = ACC.copy()
+    bad[5, 1] = np.nan
+    w = np.ones(N_ACC)
+    w[5] = 0.0
+    f_nan = FIT_A(jnp.asarray(bad), 1.0)
+    f_w0 = FIT_A(jnp.asarray(ACC), 1.0, jnp.asarray(w))
+    assert bool(f_nan.converged)
+    np.testing.assert_allclose(
+        ravel_pytree(f_nan.params)[0], ravel_pytree(f_w0.params)[0], rtol=1e-12, atol=1e-14
+    )
+    # and the masked fit is a different fit from the full one (the row counted there)
+    assert not np.allclose(ravel_pytree(f_nan.params)[0], ravel_pytree(fits[0].params)[0])
 
 
 def test_not_converged_is_reported():
@@ -490,6 +529,18 @@ def test_pipeline_fits_become_records_that_round_trip(fits, tmp_path):
     np.testing.assert_allclose(mag.stderr_soft_iron, ref.stderr_soft_iron, rtol=1e-6)
     np.testing.assert_allclose(mag.stderr_center, ref.stderr_center, rtol=1e-6)
     np.testing.assert_allclose(mag.semi_axes, ref.semi_axes, rtol=1e-6)
+    # gains no accelerometer has (30x the points' scale; motion taken for poses "converged"
+    # with 7,978) make the record failed by the single fit's rule, whatever the solver said
+    p = np.asarray(fa.params.to_vector()).copy()
+    p[:3] *= 30.0
+    wild = eqx.tree_at(lambda f: f.params, fa, pl.AccelParams.from_vector(jnp.asarray(p)))
+    bad = cj.AccelCalibration.from_fit(wild, ACC, 1.0)
+    assert bool(wild.converged) and bad.status == "failed"
+    assert any("times the data's own scale" in w for w in bad.warnings)
+    # a g the fit was not given (a user's trial: 9.81 for a fit to 1 gave "ok", rms 0.898)
+    wrong_g = cj.AccelCalibration.from_fit(fa, ACC, 9.81)
+    assert wrong_g.status == "failed" and wrong_g.rms_after > 0.5
+    assert any("give from_fit the magnitude the fit was given" in w for w in wrong_g.warnings)
 
 
 def test_parameters_changed_in_a_pipeline_become_records(fits, tmp_path):
