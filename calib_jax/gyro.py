@@ -122,12 +122,24 @@ class GyroCalibration(SensorCalibration):
 
     def apply(self, raw, acc=None) -> np.ndarray:
         """Calibrated rates C x, x = raw - b - G a (times 1 + s sign(x) with scale asymmetry),
-        rad/s, for one reading (3,), many (N, 3) or a loaded log's gyro columns; ``acc`` the
+        rad/s, for one reading (3,), many (N, 3), or the gyro columns of a loaded log or a
+        log's path; ``acc`` the
         calibrated acceleration (m/s^2) of the same samples when G is not zero. Inside JAX
         use :meth:`to_params` (:class:`calib_jax.models.gyro.GyroParams`)."""
         x = _raw_vectors(raw, "gyro") - self.bias
         if acc is not None:
             x = x - np.asarray(acc, float) @ self.g_sensitivity.T
+        elif np.any(self.g_sensitivity != 0):
+            import warnings
+
+            # the README's example once left it out: rates at rest 10x those with it
+            warnings.warn(
+                "this gyroscope's g-sensitivity G is not zero, and no acc= was given: the rates "
+                f"keep G a, up to {np.linalg.norm(self.g_sensitivity, 2) * 9.80665:.3g} "
+                f"{self.input_units} at 1 g. Pass the calibrated acceleration of the same "
+                "samples in m/s^2 (acc=accel_cal.apply(log) with output_units='m/s^2')",
+                stacklevel=2,
+            )
         if np.any(self.scale_asymmetry != 0):
             x = x * (1.0 + self.scale_asymmetry * np.sign(x))
         return x @ self.matrix.T
@@ -790,9 +802,39 @@ def _resolve_units(units: str, scale: float) -> tuple[str, list[str]]:
     return "counts", [f"gyro units: raw counts, {1 / scale:.5g} counts per rad/s"]
 
 
+ASYMMETRY_PLAUSIBLE = 0.1
+"""A scale asymmetry (or its standard error) above this on any axis is no gyroscope's (MEMS
+parts stay within about 1 %): a hand-tilted MPU-6050 log gave s_z = -2.4 +- 3.4 at F = 95,
+"found", with a z scale of 0.14. The refit is then not applied."""
+
+
+def implausible_scale(C: np.ndarray, nominal: float, units: str) -> str | None:
+    """Why a gyro fit's scale is no gyroscope's (None when it is): the singular values of C
+    against the nominal scale of ``units`` (for counts, the data's own starting scale) outside
+    :data:`calib_jax.accel.GAINS_PLAUSIBLE`, the accelerometer's rule."""
+    from .accel import GAINS_PLAUSIBLE
+
+    C = np.asarray(C, float)
+    if not np.all(np.isfinite(C)):
+        return "the fitted scale is not finite: this is no calibration"
+    sv = np.linalg.svd(C, compute_uv=False) / abs(nominal)
+    lo, hi = GAINS_PLAUSIBLE
+    if sv.min() >= lo and sv.max() <= hi:
+        return None
+    return (
+        f"the fitted scale is {sv.min():.3g} to {sv.max():.3g} times the {units} scale (the "
+        f"singular values of C), where any gyroscope's lies within {lo:g}-{hi:g} of it: the "
+        "motions do not determine the model (turns about too few axes, rests that moved, "
+        "clipped rates, or gravity directions from a poorly determined accelerometer fit). "
+        "Record poses held still with turns about all three axes between them; this is no "
+        "calibration"
+    )
+
+
 def _test_asymmetry(motions: Motions, w: np.ndarray, scale: float, solver: str, res) -> dict:
     """Refit with a scale asymmetry per axis (12 parameters) from the nine-parameter optimum
-    ``res``; an F test of the three on the LM chi2 (accepted at p < 1e-3)."""
+    ``res``; an F test of the three on the LM chi2, accepted at p < 1e-3 where every
+    coefficient and its standard error are within :data:`ASYMMETRY_PLAUSIBLE`."""
     k = int(w.sum())
     scaled = motions._replace(rates=motions.rates * scale)
     p0 = np.concatenate([np.asarray(res.params), np.zeros(3)])
@@ -801,13 +843,18 @@ def _test_asymmetry(motions: Motions, w: np.ndarray, scale: float, solver: str, 
     angles_of = _compiled("angles")
     corrected = scaled._replace(rates=asymmetric(scaled.rates, np.asarray(r12.params[9:]), np))
     miss = np.degrees(np.asarray(angles_of(r12.params[:9], corrected))[:k])
+    coef, se = np.asarray(r12.params[9:]), np.asarray(r12.stderr[9:])
+    plausible = bool(np.all(np.abs(coef) <= ASYMMETRY_PLAUSIBLE))
+    plausible &= bool(np.all(se <= ASYMMETRY_PLAUSIBLE))  # NaN is not
+    significant = bool(p < 1e-3) and bool(np.isfinite(F))
     return {
         "effect": {
-            "accepted": bool(p < 1e-3) and bool(np.isfinite(F)),
+            "accepted": significant and plausible,
+            "significant": significant,
             "F": F,
             "p": p,
-            "coefficients": np.asarray(r12.params[9:]).tolist(),
-            "stderr": np.asarray(r12.stderr[9:]).tolist(),
+            "coefficients": coef.tolist(),
+            "stderr": se.tolist(),
         },
         "fit": (*_unscaled(r12, scale), r12, miss),
         "miss": miss,
@@ -906,6 +953,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     from .accel import REST_RMS_LIMIT, calibrate_accel
 
     notes: list[str] = []
+    warn: list[str] = []
     source = None
     mag = None  # with a magnetometer, a steady turn about gravity is not taken for a rest
     data = as_log(data, None if gyro is None else "accel")
@@ -987,17 +1035,32 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
                 exc.model,
                 exc.samples_tried,
             ) from None
+        accel_rows = f"{len(acc)} accelerometer rows with a gyro reading"
         notes.append(
-            f"accelerometer calibrated first: {accel.n_intervals} static poses, status "
-            f"{accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
+            f"accelerometer calibrated first on the {accel_rows}: {accel.n_intervals} static "
+            f"poses, status {accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
         )
+        if accel.status == "poorly_determined":  # the gravity directions rest on it
+            warn.append(
+                "the accelerometer calibration the gyro fit rests on is poorly determined ("
+                + "; ".join(accel.warnings or [", ".join(accel.poorly_determined)])
+                + "): gravity directions from it carry its errors into the gyro's"
+            )
     if not accel.success:
-        coverage = [w for w in accel.warnings if w.startswith(("all poses lie", "gravity hardly"))]
+        why = [w for w in accel.warnings if w.startswith(("all poses lie", "gravity hardly"))]
+        gains = [w for w in accel.warnings if w.startswith("the fitted gains are")]
+        # gains no accelerometer has: the solver's "raise the budget" would contradict them
         raise ValueError(
-            f"the accelerometer calibration is {accel.status} ({accel.solver_message}"
-            + "".join(f"; {w}" for w in coverage)
+            f"the accelerometer calibration {accel.status.replace('_', ' ')} ("
+            + "; ".join(gains + why if gains else [accel.solver_message, *why])
             + "): the gravity directions the gyro is fitted to would be wrong; fix the "
-            "accelerometer fit first (calib-jax accel)"
+            "accelerometer fit first"
+            + (
+                f" (fitted here to the {accel_rows}; the notes say which rows were left out, "
+                "so calib-jax accel on the whole file can fit differently)"
+                if own_accel
+                else ""
+            )
         )
     iv = np.asarray(accel.static_intervals, int).reshape(-1, 2)
     if len(iv) == 0 or iv[-1, 1] > len(g):
@@ -1027,7 +1090,6 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
     dirs = pose_out / np.linalg.norm(pose_out, axis=1, keepdims=True)
 
     # motions between consecutive poses
-    warn: list[str] = []
     if own_accel and accel.rms_after >= REST_RMS_LIMIT:
         warn.append(
             f"the accelerometer's {accel.n_intervals} poses leave {accel.rms_after:.2g} of g "
@@ -1266,6 +1328,9 @@ def calibrate_gyro(
         verdict = (
             "found"
             if fit_a["effect"]["accepted"]
+            else f"fits better but is no gyroscope's (|s| or its error above "
+            f"{ASYMMETRY_PLAUSIBLE:g}), so not applied"
+            if fit_a["effect"]["significant"]
             else "tested and not found"
             if testable
             else "not testable (too few motions left for its F test)"
@@ -1296,6 +1361,10 @@ def calibrate_gyro(
 
     solver_status = int(res.status)
     status = fit_status(solver_status)
+    implausible = implausible_scale(C, nominal, units)
+    if implausible and status != "failed":
+        status = "failed"
+        warn.append(implausible)
     poor = _poorly_determined(stderr, C)
     if status == "ok" and poor:
         status = "poorly_determined"

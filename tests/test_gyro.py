@@ -113,6 +113,9 @@ def test_g_sensitivity_is_found_removed_and_reported():
     np.testing.assert_allclose(
         cal.apply(raw, acc=a), (raw - cal.bias - a @ cal.g_sensitivity.T) @ cal.matrix.T
     )
+    # and says so when not given it (the README's example once left it out)
+    with pytest.warns(UserWarning, match="g-sensitivity G is not zero, and no acc= was given"):
+        cal.apply(raw)
     off = calibrate_gyro(
         sim.acc, sim.gyro, t=sim.t, g_sensitivity=False, scale_asymmetry=False, bias_drift=False
     )
@@ -686,3 +689,16 @@ def test_a_scale_no_unit_or_count_explains_is_not_called_counts():
     assert unit == "counts" and notes[0].startswith("gyro units: none fits")
     assert _resolve_units("auto", 1.33e-4)[1] == ["gyro units: raw counts, 7518.8 counts per rad/s"]
     assert _resolve_units("auto", 0.0175)[0] == "deg/s"
+
+
+def test_a_scale_no_gyroscope_has_is_named():
+    """gyro.implausible_scale, the accelerometer's rule (accel.GAINS_PLAUSIBLE, 0.5-2) on the
+    singular values of C against the unit's nominal scale: the z scale of 0.14 a hand-tilted
+    log once gave is named; a scale 3 % off in deg/s is not."""
+    from calib_jax.gyro import UNIT_SCALES, implausible_scale
+
+    why = implausible_scale(np.diag([0.85, 0.84, 0.14]), 1.0, "rad/s")
+    assert why and "0.14 to 0.85 times the rad/s scale" in why and "no calibration" in why
+    deg = UNIT_SCALES["deg/s"]
+    assert implausible_scale(np.diag([1.03, 0.99, 1.0]) * deg, deg, "deg/s") is None
+    assert implausible_scale(np.full((3, 3), np.nan), 1.0, "rad/s")  # NaN is no scale

@@ -347,3 +347,44 @@ def test_a_hand_held_walk_fitted_as_poses_is_no_calibration(tmp_path, capsys):
     main(["batch", str(tmp_path), "--no-progress", "--json", str(tmp_path / "b.json")])
     [entry] = json.loads((tmp_path / "b.json").read_text())["results"]
     assert entry["status"] == "failed" and "the fitted gains are" in entry["message"], entry
+
+
+def test_a_hand_tilted_log_is_no_gyro_calibration(tmp_path):
+    """pms67/Attitude-Estimation's MPU-6050 (tests/data/pms67_mpu6050/NOTES.md, MIT), tilted by
+    hand within about 75 deg of up. diagnose said "at_floor ... nothing beyond noise" and nothing
+    of the one-sided poses; it now says the base calibration is poorly determined and why, in
+    calib-jax accel's words. Split into a phone's two files (the gyro at half the rate, on its
+    own clock), calibrate_gyro "found" a scale asymmetry of s_z = -2.4 +- 3.4 (F = 95) and
+    returned a z scale of 0.14 with no warning: an asymmetry or its error beyond
+    gyro.ASYMMETRY_PLAUSIBLE (0.1) is not applied, and the accelerometer fit the gyro rests
+    on, poorly determined, is a warning."""
+    path = Path(__file__).parent / "data" / "pms67_mpu6050" / "imu_data.csv"
+    from calib_jax.diagnose import diagnose_accel
+
+    d = diagnose_accel(cj.load_log(path), progress=False)
+    assert d.verdict == "at_floor"
+    assert any("the base calibration itself is poorly determined" in n for n in d.notes)
+    assert any(n.startswith("the poses: all poses lie within") for n in d.notes), d.notes
+
+    raw = np.loadtxt(path, delimiter=",", skiprows=1)
+    t, acc, rate = raw[:, 0], raw[:, 1:4] * 9.80665, np.radians(raw[:, 4:7])
+    head = '"Time (s)","{0} x ({1})","{0} y ({1})","{0} z ({1})","Absolute ({1})"'
+    for name, what, unit, tt, v in (
+        ("Accelerometer.csv", "Acceleration", "m/s^2", t, acc),
+        ("Gyroscope.csv", "Gyroscope", "rad/s", t[::2] + 0.003, rate[::2]),
+    ):
+        rows = np.column_stack([tt, v, np.linalg.norm(v, axis=1)])
+        header = head.format(what, unit)
+        np.savetxt(tmp_path / name, rows, delimiter=",", header=header, comments="")
+    cal = cj.calibrate_gyro(
+        cj.load_log(tmp_path / "Accelerometer.csv"), cj.load_log(tmp_path / "Gyroscope.csv")
+    )
+    asym = cal.effects["scale_asymmetry"]
+    assert asym["significant"] and not asym["accepted"], asym
+    assert np.all(cal.scale_asymmetry == 0.0)
+    assert any("no gyroscope's" in n for n in cal.notes)
+    assert any("the accelerometer calibration the gyro fit rests on" in w for w in cal.warnings)
+    # without the asymmetry the scale is within the plausible band, and poorly determined
+    assert cal.status == "poorly_determined", (cal.status, cal.warnings)
+    sv = np.linalg.svd(cal.matrix, compute_uv=False)
+    assert 0.5 < sv.min() and sv.max() < 2.0, sv

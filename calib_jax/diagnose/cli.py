@@ -28,6 +28,14 @@ def run(args: argparse.Namespace) -> int:
     defaulted = args.sensor is None
     if args.sensor is None:  # the accelerometer, unless the log has only a magnetometer
         args.sensor = "mag" if log.acc is None and log.mag is not None else "accel"
+        if log.acc is None and log.mag is None and log.gyro is not None:
+            # a phone's Gyroscope.csv was told to map accelerometer columns with --columns
+            raise ValueError(
+                f"{args.file} holds a gyroscope only, and diagnose has no gyroscope diagnosis "
+                "(it diagnoses accelerometers, magnetometers and the two together): calib-jax "
+                "gyro ACC_FILE GYRO_FILE calibrates a gyroscope and tests its rest bias for "
+                "g-sensitivity, drift and temperature, and its scale for asymmetry"
+            )
         if args.sensor == "accel" and (guess := _sensor_guessed(log, args.file)):
             guessed = (
                 f"note: {guess} diagnosed as an accelerometer; for a magnetometer give --sensor mag"

@@ -189,6 +189,9 @@ class Observations:
     sensor: str
     kind: str  # "interval means" or "samples"
     notes: list[str] = field(default_factory=list)
+    poses_poor: list[str] = field(default_factory=list)
+    """What the poses' spread leaves poorly determined in the base calibration (calib-jax
+    accel's coverage warnings), said with the verdict: a floor reached says nothing of them."""
 
     @property
     def m(self) -> int:
@@ -1067,11 +1070,18 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
         notes.append(
             f"at the noise floor: rms {rms_after * scale_to_output:.3g} {units} against a floor of "
             f"{floor * scale_to_output:.3g} {units}; nothing beyond noise"
+            + (
+                " that these poses can show; the base calibration itself is poorly determined "
+                "(the next note)"
+                if obs.poses_poor
+                else ""
+            )
         )
     elif not unexplained:
         notes.append(
             f"rms {rms_after / floor:.2f}x the floor without significant structure in any driver"
         )
+    notes += [f"the poses: {w}" for w in obs.poses_poor]
     groups = {}
     for eff in res["effects"]:
         if eff in GROUPS:
@@ -1242,12 +1252,20 @@ def diagnose_accel(
         t = np.arange(n) / (sample_rate or 1.0)
     t = np.asarray(t, float)
     ok, det_notes = screen_samples(x, "accel")  # the way in of calibrate_accel
+    poses_poor: list[str] = []
     if intervals is not None:
         spans = [(int(a), int(b)) for a, b in intervals if b - a > 1 and ok[a:b].all()]
     else:
         # calibrate_accel's way in: the same screen, detector (a sweep scored by the fit, or
         # fixed blocks) and pose checks, so a log it refuses is not diagnosed either
-        from ..accel import check_poses, detect_units, no_accelerometer_unit, radius_determined
+        from ..accel import (
+            _coverage_warnings,
+            check_poses,
+            detect_units,
+            no_accelerometer_unit,
+            nominal_centre_of,
+            radius_determined,
+        )
 
         need: str | None = "9 distinct static poses"
         try:
@@ -1273,6 +1291,15 @@ def diagnose_accel(
             return d
         spans = [(iv.start, iv.stop) for iv in found.report.intervals]
         det_notes += found.report.notes(sample_rate)
+        # calib-jax accel's warnings on the poses' spread (a hand-tilted log whose poses
+        # lay within 73 deg of up was "at_floor ... nothing beyond noise", no word of them)
+        poses_poor = _coverage_warnings(
+            found.points,
+            centre,
+            9,
+            nominal_centre_of(found),
+            pose_table=found.report.kind == "pose_table",
+        )
     m = len(spans)
     if m < MIN_OBSERVATIONS:
         d = _not_possible(
@@ -1312,6 +1339,7 @@ def diagnose_accel(
         base="full",
         sensor="accel",
         kind="static intervals" if not block else f"blocks of {block}",
+        poses_poor=poses_poor,
     )
     obs.notes.extend(det_notes)
     if temp is None:

@@ -984,7 +984,10 @@ def _read_text(
             names = _names_in_comment(ln, delim, width) if _skip(ln) and ln.strip() else None
             if names:
                 header = names
-                notes.append(f"column names read from the comment line {ln.strip()[:70]!r}")
+                line = ln.strip()  # cut after a name, not inside one (EuRoC's "[rad ")
+                cut = line.rfind(delim or " ", 0, 70)
+                shown = line if len(line) <= 70 else line[: cut if cut > 0 else 70] + " ..."
+                notes.append(f"column names read from the comment line {shown!r}")
                 break
     preamble: dict[str, float] = {} if e4 is None else {"sample rate": e4[1]}
     ignored = []
