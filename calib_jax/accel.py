@@ -63,7 +63,7 @@ from .observations import (
 )
 from .padding import pad_rows
 from .runtime import disk_jit
-from .static import StaticReport, distinct_directions
+from .static import StaticReport, check_sample_rate, distinct_directions
 
 G_STANDARD = 9.80665
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
@@ -344,7 +344,7 @@ def _coverage(pts: np.ndarray, dirs: np.ndarray) -> tuple[float, np.ndarray, flo
 
 
 # fit points whose covariance's smallest / largest eigenvalue is below this lie in one plane
-# (the single fit and the batch, calib_jax.batch._checks)
+# (the single fit, the batch and the pipeline: calib_jax.geometry.prefit_status)
 FLAT_POSES = 1e-3
 
 
@@ -559,6 +559,12 @@ def calibrate_accel(
     units = _UNIT_ALIASES.get(str(units).lower(), units) if units != "auto" else "auto"
     if units not in ("auto", "counts", "g", "m/s^2"):
         raise ValueError(f"units must be auto, counts, g or m/s^2, got {units!r}")
+    if g is not None and (not isinstance(g, (int, float, np.number)) or isinstance(g, bool)):
+        raise ValueError(
+            f"g={g!r}: the reference magnitude must be a number in the output unit (9.81744, "
+            "not a string), or left out"
+        )
+    check_sample_rate(sample_rate)
 
     obs = accel_observations(
         x,

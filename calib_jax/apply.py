@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import atomic_write
+from .calibration import atomic_write, off_scale
 from .export import G_STANDARD, Correction, corrections
 from .io.files import SensorLog, iter_rows, load_log
 
@@ -94,13 +94,38 @@ def _corrected(use: dict[str, Correction], raw: dict[str, np.ndarray]) -> dict[s
     return out
 
 
+def _off_scale_notes(use: dict[str, Correction], acc: np.ndarray | None) -> list[str]:
+    """A note, and a UserWarning, when the corrected acceleration ``acc`` is not near g in the
+    correction's output unit (the rule of ``AccelCalibration.apply``: an Xsens record in
+    counts applied to a log in g wrote |a| of 136 m/s^2 on every row, without a word)."""
+    scale = _to_ms2(use.get("acc"))
+    if acc is None or scale is None:
+        return []
+    units = f"{use['acc'].input_units or 'the input unit'} (the calibration's input)"
+    why = off_scale(acc, G_STANDARD / scale, units, "g")
+    if not why:
+        return []
+    import warnings
+
+    warnings.warn(why, stacklevel=3)
+    return [why]
+
+
 def correct_log(cal, log: SensorLog) -> SensorLog:
     """A copy of a loaded log with each triad the calibration holds corrected (a MARG
     magnetometer rotated into the accelerometer's frame, a gyroscope's g-sensitivity removed
-    with the corrected acceleration); the other columns as they were."""
+    with the corrected acceleration); the other columns as they were. A note (and a
+    UserWarning) where the corrected acceleration is far from g: readings in another unit."""
     use, notes = _plan(corrections(cal), log)
+    new = _corrected_log(use, log)
+    notes += _off_scale_notes(use, new.acc if "acc" in use else None)
+    return replace(new, notes=[*log.notes, *notes])
+
+
+def _corrected_log(use: dict[str, Correction], log: SensorLog) -> SensorLog:
+    """``log`` with the triads in ``use`` corrected (no notes: the caller's)."""
     new = _corrected(use, {attr: getattr(log, attr) for attr in use})
-    return replace(log, **new, notes=[*log.notes, *notes], layout=None)
+    return replace(log, **new, layout=None)
 
 
 def apply_calibration(
@@ -132,8 +157,10 @@ def apply_calibration(
     # a headerless 3- or 4-column log holds the one sensor a single-sensor calibration corrects
     hint = {"sensor": next(iter(corr))} if len(corr) == 1 else {}
     if isinstance(log, SensorLog):
-        fixed = correct_log(corr, log)
-        return fixed if out is None else _write(out, [(_columns(fixed), 0)], log, corr, False)
+        if out is None:
+            return correct_log(corr, log)
+        fixed = _corrected_log(_plan(corr, log)[0], log)  # _write says what _plan found
+        return _write(out, [(_columns(fixed), 0)], log, corr, False)
     if out is None:
         return correct_log(corr, load_log(log, columns=columns, sample_rate=sample_rate, **hint))
     if Path(out).resolve() == Path(log).resolve():
@@ -143,7 +170,7 @@ def apply_calibration(
     if head.layout is None and len(head) >= chunk_rows:
         head = load_log(log, columns=columns, sample_rate=sample_rate, **hint)  # whole
     if head.layout is None or len(head) < chunk_rows:
-        fixed = correct_log(corr, head)
+        fixed = _corrected_log(use, head)
         return _write(out, [(_columns(fixed), 0)], head, corr, False)
     return _write(out, _stream(log, head, use, chunk_rows), head, corr, True)
 
@@ -196,6 +223,9 @@ def _write(out, blocks, head: SensorLog, corr, streamed: bool) -> ApplyReport:
             if names is None:
                 names = list(cols)
                 fh.write(",".join(names) + "\n")
+                if "ax" in cols and "acc" in use:  # judged on the first block
+                    acc = np.column_stack([cols["ax"], cols["ay"], cols["az"]])
+                    plan_notes += _off_scale_notes(use, acc)
             n = len(cols[names[0]])
             if n:
                 fmt = ["%.17g" if c == "t" else "%.12g" for c in names]

@@ -251,8 +251,9 @@ def _from_dict(d: dict, where) -> dict[str, Correction]:
         rec = BatchRecord.from_dict(d, source=where)
         if len(rec) != 1:
             raise ValueError(
-                f"{where}: a batch of {len(rec)} calibrations; export one entry in Python "
-                "(calib_jax.export.correction_from_result(BatchRecord.load(path).entries[i]))"
+                f"{where or 'this BatchRecord'}: a batch of {len(rec)} calibrations; export "
+                "one entry in Python (calib_jax.export.correction_from_result(record.entries[i],"
+                " record.sensor), record = BatchRecord.load(path) or the one in memory)"
             )
         return {rec.sensor: correction_from_result(rec.entries[0], rec.sensor)}
     return {"accel": _accel(AccelCalibration.from_dict(d, source=where))}

@@ -786,6 +786,19 @@ def _choose(candidates: list[Candidate], covered: list[int]) -> int | None:
     )
 
 
+def check_sample_rate(sample_rate) -> None:
+    """A ValueError unless ``sample_rate`` is None or a positive, finite number of Hz (-5 and
+    0 were taken, and a window of 3 samples reported as "-0.6 s")."""
+    if sample_rate is None:
+        return
+    number = isinstance(sample_rate, (int, float, np.integer, np.floating))
+    if not number or isinstance(sample_rate, bool) or not 0 < sample_rate < np.inf:
+        raise ValueError(
+            f"sample_rate={sample_rate!r}: the sampling rate must be a positive number of Hz "
+            "(--sample-rate 100), or left out where the log has a time column"
+        )
+
+
 def _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim):
     if window is not None and (not np.isfinite(window) or int(window) != window or window < 3):
         raise ValueError(
@@ -926,6 +939,7 @@ def detect_static(
         minimum duration or trim), or ``min_duration`` without ``sample_rate``.
     """
     _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim)
+    check_sample_rate(sample_rate)
     x = np.asarray(x, float)
     n = len(x)
     valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool)

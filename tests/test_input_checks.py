@@ -8,6 +8,7 @@ import errno
 import json
 import re
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -612,6 +613,25 @@ def test_python_callers_wrong_types_are_named():
         cj.load_log(np.zeros((5, 3)))
     with pytest.raises(ValueError, match=r"unknown candidate effect\(s\) \['outliers'\]"):
         diagnose_mag(_tumble(seed=1), candidates="outliers", progress=False)  # one candidate
+    # the second trial (2026-11-28): g as a string was "'<=' not supported between 'str' and
+    # 'int'"; a sample rate of -5 or 0 Hz was taken ("window 3 samples (-0.6 s)")
+    x = np.zeros((100, 3))
+    with pytest.raises(ValueError, match=r"g='9.81': the reference magnitude must be a number"):
+        cj.calibrate_accel(x, g="9.81")
+    for rate in (-5, 0, float("nan")):
+        with pytest.raises(ValueError, match="the sampling rate must be a positive number"):
+            cj.calibrate_accel(x, sample_rate=rate)
+    # a path where the pure fit takes an array (jit: 'not marked as static'); a MagParams given
+    # to the accelerometer's from_params (float()'s TypeError)
+    from calib_jax import pipeline as pl
+
+    with pytest.raises(ValueError, match="fit_accel takes an \\(N, 3\\) array of readings"):
+        pl.fit_accel(cj.mag_demo_log_path())
+    with pytest.raises(ValueError, match="takes AccelParams, got MagParams"):
+        cj.AccelCalibration.from_params(pl.MagParams(np.zeros(3), np.eye(3)))
+    # and apply takes a log's path as it takes the loaded log ("could not convert string")
+    path = cj.mag_demo_log_path()
+    np.testing.assert_array_equal(_accel_cal().apply(path), _accel_cal().apply(cj.load_log(path)))
 
 
 def test_python_callers_mistakes_are_named():
@@ -645,3 +665,33 @@ def test_python_callers_mistakes_are_named():
     tumble = cj.load_log(cj.mag_demo_log_path())
     with pytest.raises(ValueError, match="radius 0.3086.*passed the other way round"):
         cj.calibrate_marg(tumble.mag, tumble.acc)
+
+
+def test_records_equal_whenever_fitted_and_apply_to_a_file_says_the_unit_is_wrong(tmp_path):
+    """A Python user's trial (2026-11-28): two fits of one log a second apart were unequal
+    (``==`` compared the fit's date), and an Xsens record (counts) applied to a log in g
+    wrote |a| of 136 m/s^2 on every row without a word, where ``cal.apply(array)`` warned.
+    apply_calibration now warns and notes it, in memory and to a file; the record's own log
+    is written without a note."""
+    import dataclasses
+
+    from calib_jax.apply import apply_calibration
+
+    a = _accel_cal()
+    assert a == dataclasses.replace(a, date="2001-01-01T00:00:00+00:00")
+    assert a != dataclasses.replace(a, params=a.params * 1.001)
+    log = tmp_path / "in_g.csv"
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(200, 3))
+    np.savetxt(log, d / np.linalg.norm(d, axis=1, keepdims=True), delimiter=",",
+               header="ax,ay,az", comments="")  # fmt: skip
+    counts = _accel_cal(params=a.params * np.r_[np.full(6, 4000.0), np.full(3, 1.0)],
+                        input_units="counts")  # fmt: skip
+    for out in (None, tmp_path / "out.csv"):
+        with pytest.warns(UserWarning, match="not in counts"):
+            res = apply_calibration(counts, log, out)
+        assert any("median magnitude" in n for n in res.notes), res.notes
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = apply_calibration(a, log, tmp_path / "own.csv")
+    assert not any("median magnitude" in n for n in res.notes)
