@@ -654,8 +654,20 @@ def from_ros_yaml(text: str, source: str | None = None) -> Correction:
             "'bias' with 3)"
         )
     m = re.search(r"^sensor\s*:\s*(\w+)", text, re.M)
+    # the units to_ros_yaml states in its comment (a user's round trip lost them)
+    said = r"^#\s*corrected = SM raw - bias; raw in (.+?), corrected in (.+?)\s*$"
+    u = re.search(said, text, re.M)
+    units = [None, None] if u is None else [u.group(1), u.group(2)]
+    units = [None if v in ("raw units", "calibrated units") else v for v in units]
     C = SM.reshape(3, 3)
-    c = Correction(m.group(1) if m else "accel", C, np.linalg.solve(C, bias), source=source)
+    c = Correction(
+        m.group(1) if m else "accel",
+        C,
+        np.linalg.solve(C, bias),
+        input_units=units[0],
+        output_units=units[1],
+        source=source,
+    )
     return _checked(c, source)
 
 

@@ -210,6 +210,9 @@ def test_round_trip_through_every_format(tmp_path, fmt, sensor):
     scale = 9.80665 if (fmt == "ros" and sensor == "accel") else 1.0  # g -> m/s^2 for ROS
     assert _rel(back.matrix, scale * c.matrix) < 1e-13
     assert _rel(back.bias, c.bias) < 1e-13
+    if fmt == "ros":  # the units its comment states come back (they were None)
+        out = "m/s^2" if sensor == "accel" else c.output_units
+        assert (back.input_units, back.output_units) == (c.input_units, out), back
 
 
 def test_marg_magnetometer_correction_is_in_the_accelerometer_frame():

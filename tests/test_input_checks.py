@@ -629,6 +629,11 @@ def test_python_callers_wrong_types_are_named():
         pl.fit_accel(cj.mag_demo_log_path())
     with pytest.raises(ValueError, match="takes AccelParams, got MagParams"):
         cj.AccelCalibration.from_params(pl.MagParams(np.zeros(3), np.eye(3)))
+    # jit of a host-side fit: TracerArrayConversionError, with no word of the pipeline
+    import jax
+
+    with pytest.raises(ValueError, match="inside JAX use calib_jax.pipeline"):
+        jax.jit(cj.calibrate_accel)(np.zeros((100, 3)))
     # and apply takes a log's path as it takes the loaded log ("could not convert string")
     path = cj.mag_demo_log_path()
     np.testing.assert_array_equal(_accel_cal().apply(path), _accel_cal().apply(cj.load_log(path)))

@@ -1462,6 +1462,12 @@ def as_log(data, sensor: str | None = None):
     ``calibrate_accel("log.csv")`` reads the file as ``calib-jax accel log.csv`` does."""
     if isinstance(data, str | bytes) or hasattr(data, "__fspath__"):
         return load_log(os.fsdecode(data), sensor=sensor)
+    if type(data).__name__.endswith("Tracer"):  # jax.jit(calibrate_accel): jax's error named
+        raise ValueError(  # no way out (TracerArrayConversionError)
+            "the calibrate_* functions run on the host (pose detection, checks, reports) and "
+            "cannot be traced by jit, vmap or grad: inside JAX use calib_jax.pipeline "
+            "(fit_accel, fit_mag, fit_gyro, fit_batch), which are pure and differentiable"
+        )
     return data
 
 
