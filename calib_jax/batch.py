@@ -16,9 +16,10 @@ with the samples' degrees of freedom for the covariance.
 
 Per sensor the work is two passes over N samples (about 80 N flops for S) plus a few dozen
 10 x 9 operations per iteration, instead of an (N x 9) Jacobian per iteration. Everything is
-vmapped over sensors with per-member state; a sensor with too few valid samples, or whose
-samples sit about one reading or in one plane, gets its own status (nothing fitted, NaN
-parameters) and leaves the others unchanged.
+vmapped over sensors with per-member state; a sensor with too few valid samples, or with all
+directions in one plane, gets its own status (nothing fitted, NaN parameters), and one whose
+fit is no calibration (a sensor held still: NO_SHELL, RAN_AWAY) is "failed"; either way the
+others are unchanged.
 
 Precision: theta' S theta cancels terms of size N to leave chi2 ~ N sigma^2, so chi2 carries a
 relative round-off of about eps / sigma^2 (1e-10 at sigma = 1e-3 of the radius). The fitted

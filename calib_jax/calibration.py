@@ -71,11 +71,19 @@ class Record:
         of one log a second apart were unequal)."""
         if type(other) is not type(self):
             return NotImplemented
-        a, b = self.to_dict(), other.to_dict()
-        a.pop("date", None), b.pop("date", None)
-        return a == b
+        return _without_dates(self.to_dict()) == _without_dates(other.to_dict())
 
     __hash__ = None  # type: ignore[assignment]
+
+
+def _without_dates(d):
+    """A record's dict without its ``date`` keys, nested records' included (a MARG record
+    holds its sensors' records, each with the second its fit ran)."""
+    if isinstance(d, dict):
+        return {k: _without_dates(v) for k, v in d.items() if k != "date"}
+    if isinstance(d, list):
+        return [_without_dates(v) for v in d]
+    return d
 
 
 def _utc_now() -> str:
@@ -343,15 +351,19 @@ class AccelCalibration(SensorCalibration):
         outcome = pipeline_outcome(fit, "pipeline.fit_accel", bool(np.all(np.isfinite(p))))
         # the single fit's rule on the gains, in units of the points' scale (motion taken for
         # poses gave "converged" with gains of 7,978)
-        r = float(norm.mean()) if len(norm) else float("nan")
-        implausible = implausible_gains(p / np.concatenate([np.full(6, r / g), np.full(3, r)]))
+        # the data's scale: the points' RMS distance from the fitted offset, not from zero
+        # (counts about 32768 would make every gain look tiny), as the single fit's fit_norm
+        r = float(np.sqrt(np.mean(np.sum((x - p[6:9]) ** 2, axis=1)))) if len(x) else np.nan
         rms_after = float(np.sqrt(np.mean((np.linalg.norm(a, axis=1) / g - 1.0) ** 2)))
-        if not implausible and not rms_after <= NO_SHELL:  # a g the fit was not given
+        usable = outcome["status"] in ("ok", "not_converged") and np.isfinite(rms_after)
+        implausible = implausible_gains(p / np.concatenate([np.full(6, r / g), np.full(3, r)]))
+        if usable and rms_after > NO_SHELL:  # a g the fit was not given (its gains look wrong)
+            med = float(np.median(np.linalg.norm(a, axis=1)))
             implausible = (
                 f"the calibrated points miss g = {g:g} by {rms_after:.3g} RMS (relative), "
-                f"above {NO_SHELL:g}, where the fit's own residual is {float(fit.rms):.3g} of "
-                "its magnitude: give from_fit the magnitude the fit was given, and the points "
-                "it was fitted to"
+                f"above {NO_SHELL:g} (their median |a| is {med:.4g}): give from_fit the "
+                "magnitude the fit was given and the points it was fitted to; if you did, the "
+                "parameters are no calibration of these points"
             )
         if implausible and outcome["status"] in ("ok", "not_converged"):
             outcome["status"] = "failed"
@@ -995,8 +1007,8 @@ class MagCalibration(SensorCalibration):
         """The record of a :func:`calib_jax.pipeline.fit_mag` result (one sensor), to save,
         report or export like a :func:`calib_jax.calibrate_mag` result: ``raw`` the (N, 3)
         samples it was fitted to, ``field`` and ``model`` the magnitude and model it was given.
-        The status is the solver's: a pipeline fit has no coverage or plausibility checks (a
-        note says so)."""
+        The status is the solver's, after the pipeline's own checks (too few rows, one plane,
+        no shell, a fit that ran away); there is no coverage report (a note says so)."""
         from .sphere import sphere_coverage
 
         c = np.asarray(fit.params.hard_iron, float)

@@ -715,16 +715,22 @@ def run_apply(args: argparse.Namespace) -> int:
     out = args.out or str(log.with_name(log.stem + ".calibrated.csv"))
     _writable_parent(out, "--out")
     try:
-        rep = apply_calibration(
-            corr,
-            args.file,
-            out,
-            columns=args.columns,
-            sample_rate=args.sample_rate,
-            chunk_rows=args.chunk_rows,
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            rep = apply_calibration(
+                corr,
+                args.file,
+                out,
+                columns=args.columns,
+                sample_rate=args.sample_rate,
+                chunk_rows=args.chunk_rows,
+            )
     except (UnicodeError, OSError) as exc:
         raise _unreadable(args.file, f"cannot read it: {exc}") from exc
+    said = [str(w.message) for w in caught]
+    for w in said:  # readings in another unit: a warning, not again among the notes
+        print(f"warning: {w}", file=sys.stderr)
+    rep.notes = [n for n in rep.notes if n not in said]
     print(f"calib-jax apply: {args.calibration} -> {args.file}")
     print(rep.report())
     return 0

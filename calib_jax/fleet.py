@@ -175,10 +175,11 @@ def _judge_mag(entry: dict, pts: np.ndarray, se_n: np.ndarray, options: dict) ->
 
     # fitted, then refused by the batch's own shell checks (NO_SHELL, RAN_AWAY): the single
     # fit's judgement still gives the words and warnings calib-jax mag would
+    p = np.asarray(entry["params"], float)
     refused = entry.get("solver_status") in (Status.NO_SHELL, Status.RAN_AWAY)
+    refused &= bool(np.all(np.isfinite(p)))
     if not is_usable(entry["status"]) and not refused:
         return {}
-    p = np.asarray(entry["params"], float)
     centre, W = p[:3], p[3:].reshape(3, 3)
     radius = _mag_norms(p, pts, options)[1]
     model = options.get("model") or "full"
@@ -211,9 +212,14 @@ def _judge_accel(entry: dict, info: dict, model: str) -> None:
 
     # parameters and standard errors in units of g: gains and cross terms over r / g,
     # biases over r
+    from .status import Status
+
     r, g = info["fit_norm"], info["g"]
     scale = np.concatenate([np.full(6, r / g), np.full(3, r)])
-    if entry["status"] in ("ok", "not_converged"):
+    # fitted, then refused by the batch's shell checks (a walk taken for poses runs away):
+    # the single fit's rule gives calib-jax accel's words for it
+    refused = entry.get("solver_status") in (Status.NO_SHELL, Status.RAN_AWAY)
+    if entry["status"] in ("ok", "not_converged") or refused:
         implausible = implausible_gains(np.asarray(entry["params"], float) / scale)
         if implausible:
             entry["status"] = "failed"

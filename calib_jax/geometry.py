@@ -127,18 +127,20 @@ hard iron jumping by 2/3 of the field, 15 %); a tumble reaches 0.5-2 %. The sing
 (calib_jax.mag.RMS_NO_SHELL_PCT), the batch and the pipeline (:func:`shell_status`)."""
 
 
-def prefit_status(S, n_params: int, min_points: int, flat_below: float):
+def prefit_status(S, n_params: int, min_points: int, flat_below: float, count=None):
     """The status before a moment-form or pipeline fit, inside jit: INSUFFICIENT_DATA for fewer
     valid points than ``min_points`` or than the parameters (as many is an exact fit, as in the
     single fits); NO_COVERAGE for points in one plane, whose covariance (S's second moments
     of the centred samples, :func:`normalised_moments`) has a smallest to largest eigenvalue
     ratio below ``flat_below`` (the single fits' own thresholds,
-    :data:`calib_jax.accel.FLAT_POSES` and :data:`calib_jax.mag.FLAT_POINTS`); -1 otherwise."""
+    :data:`calib_jax.accel.FLAT_POSES` and :data:`calib_jax.mag.FLAT_POINTS`); -1 otherwise.
+    ``count``: the number of valid points where S was summed with weights other than 0/1 (the
+    pipeline's 1/sigma^2); by default S's weight sum, the batch's count."""
     n = S[9, 9]
     scatter = S[6:9, 6:9] / jnp.maximum(n, 1.0)
     ev, _ = eigh_small(scatter)
     flat = ev[0] <= flat_below * jnp.maximum(ev[2], 1e-300)
-    too_few = n < max(min_points, n_params)
+    too_few = (n if count is None else count) < max(min_points, n_params)
     return jnp.where(
         too_few,
         int(Status.INSUFFICIENT_DATA),
@@ -156,12 +158,12 @@ magnetometer fit, calib_jax.mag; the batch and the pipeline, :func:`shell_status
 def shell_status(status, rms_relative, radius_over_spread):
     """A fit's status with NO_SHELL where its relative RMS radial error is above
     :data:`NO_SHELL`, and RAN_AWAY where its ellipsoid is over :data:`RUNAWAY` times the
-    samples' spread (inside jit). A fit refused before it ran keeps its code (its RMS is NaN,
-    or that of the stand-in the batch fits)."""
-    refused = (status == int(Status.INSUFFICIENT_DATA)) | (status == int(Status.NO_COVERAGE))
-    refused |= status == int(Status.FAILED)
+    samples' spread (inside jit). A fit refused before it ran, or one that failed (NONFINITE,
+    SINGULAR, FAILED), keeps its code."""
+    kept = (Status.INSUFFICIENT_DATA, Status.NO_COVERAGE, Status.FAILED, Status.NONFINITE)
+    refused = jnp.isin(status, jnp.asarray([int(c) for c in (*kept, Status.SINGULAR)]))
     code = jnp.where(rms_relative > NO_SHELL, int(Status.NO_SHELL), status)
-    code = jnp.where(radius_over_spread < RUNAWAY, code, int(Status.RAN_AWAY))
+    code = jnp.where(radius_over_spread > RUNAWAY, int(Status.RAN_AWAY), code)  # NaN: not
     return jnp.where(refused, status, code).astype(jnp.asarray(status).dtype)
 
 

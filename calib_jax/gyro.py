@@ -1051,7 +1051,9 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         gains = [w for w in accel.warnings if w.startswith("the fitted gains are")]
         # gains no accelerometer has: the solver's "raise the budget" would contradict them
         raise ValueError(
-            f"the accelerometer calibration {accel.status.replace('_', ' ')} ("
+            "the accelerometer calibration "
+            + ("failed" if accel.status == "failed" else "did not converge")
+            + " ("
             + "; ".join(gains + why if gains else [accel.solver_message, *why])
             + "): the gravity directions the gyro is fitted to would be wrong; fix the "
             "accelerometer fit first"

@@ -293,7 +293,7 @@ def _refusal(g_ok, x, w, n_params: int, flat_below: float):
     traced magnitude that is not positive and finite (``g_ok``, :func:`_magnitude_ok`), else
     :func:`calib_jax.geometry.prefit_status` of the centred samples ``x`` (too few valid ones;
     one plane), the batch's own checks."""
-    pre = prefit_status(moments(x, w), n_params, 10, flat_below)
+    pre = prefit_status(moments(x, w), n_params, 10, flat_below, count=jnp.sum(w > 0))
     return pre if g_ok is True else jnp.where(g_ok, pre, int(Status.FAILED))
 
 
@@ -372,7 +372,10 @@ def fit_accel(
         and ``weights`` by the implicit function theorem. Data that cannot determine the
         model are refused before the fit, with NaN ``params`` and ``rms``, by the batch's
         checks (:func:`calib_jax.geometry.prefit_status`): status INSUFFICIENT_DATA for fewer
-        than 10 valid rows, NO_COVERAGE for a sensor held still or poses in one plane.
+        than 10 valid rows, NO_COVERAGE for poses in one plane. A fit through a sensor held
+        still is no calibration either (fitted, params kept): NO_SHELL for a relative RMS
+        above 12 %, RAN_AWAY for an ellipsoid over 10 times the samples' spread
+        (:func:`calib_jax.geometry.shell_status`).
         Jittable and vmappable (see
         :func:`fit_batch`); one compile per (N, dtype, static options), also when called
         eagerly (the fit is jitted inside).

@@ -141,8 +141,9 @@ def worst_status(*words: str) -> str:
 
 def fit_status(status: int, usable: bool = True) -> str:
     """The calibration records' status word for a solver status: "failed" (nothing usable:
-    non-finite, singular, an external failure, or ``usable`` False), "not_converged" (the
-    budget ran out) or "ok"; callers refine "ok" to "poorly_determined"."""
+    non-finite, singular, an external failure, refused before the fit or no calibration after
+    it (INSUFFICIENT_DATA, NO_COVERAGE, NO_SHELL, RAN_AWAY), or ``usable`` False),
+    "not_converged" (the budget ran out) or "ok"; callers refine "ok" to "poorly_determined"."""
     bad = (Status.NONFINITE, Status.SINGULAR, Status.FAILED, Status.INSUFFICIENT_DATA)
     if int(status) in bad + (Status.NO_COVERAGE, Status.NO_SHELL, Status.RAN_AWAY) or not usable:
         return "failed"

@@ -74,8 +74,8 @@ def test_bad_sensors_get_their_own_status_and_leave_the_others_bit_identical():
     flat = raw[:1].copy()
     flat[..., 2] = 0.3  # every direction in one plane
     few = raw[:1].copy()
-    # a board held still: the fit ran out of iterations through its noise cloud
-    # (not_converged), to an ellipsoid far larger than the cloud (the magnetometer's: "ok")
+    # a board held still: the fit ran out of iterations (not_converged) to an ellipsoid far
+    # larger than its noise cloud, and is now RAN_AWAY ("failed")
     still = raw[:1, :1] + 1e-3 * np.random.default_rng(9).normal(size=(1, N, 3))
     mask = np.ones((S + 4, N), bool)
     mask[S + 2, 10:] = False  # 10 valid samples

@@ -155,7 +155,9 @@ def test_a_sensor_held_still_is_refused_and_a_nan_row_is_masked(fits):
         assert int(f.status) == code and not bool(f.converged)
         assert f.message.startswith("no calibration:"), f.message
         record = cj.AccelCalibration if fit is FIT_A else cj.MagCalibration
-        assert record.from_fit(f, still, 1.0).status == "failed"
+        rec = record.from_fit(f, still, 1.0)
+        assert rec.status == "failed"
+        assert not any("the magnitude the fit was given" in w for w in rec.warnings)
         flat = raw.copy()
         flat[:, 2] = 0.3
         f = fit(jnp.asarray(flat), 1.0)
@@ -167,6 +169,13 @@ def test_a_sensor_held_still_is_refused_and_a_nan_row_is_masked(fits):
     w[5] = 0.0
     f_nan = FIT_A(jnp.asarray(bad), 1.0)
     f_w0 = FIT_A(jnp.asarray(ACC), 1.0, jnp.asarray(w))
+    # weights that sum to 1 are as many rows as weights of 1 (the row count is checked, not
+    # the weights' sum: a first version refused them as INSUFFICIENT_DATA)
+    f_unit = FIT_A(jnp.asarray(ACC), 1.0, jnp.full(N_ACC, 1.0 / N_ACC))
+    assert bool(f_unit.converged), f_unit.message
+    np.testing.assert_allclose(
+        ravel_pytree(f_unit.params)[0], ravel_pytree(fits[0].params)[0], rtol=1e-7, atol=1e-9
+    )
     assert bool(f_nan.converged)
     np.testing.assert_allclose(
         ravel_pytree(f_nan.params)[0], ravel_pytree(f_w0.params)[0], rtol=1e-12, atol=1e-14
@@ -529,18 +538,24 @@ def test_pipeline_fits_become_records_that_round_trip(fits, tmp_path):
     np.testing.assert_allclose(mag.stderr_soft_iron, ref.stderr_soft_iron, rtol=1e-6)
     np.testing.assert_allclose(mag.stderr_center, ref.stderr_center, rtol=1e-6)
     np.testing.assert_allclose(mag.semi_axes, ref.semi_axes, rtol=1e-6)
-    # gains no accelerometer has (30x the points' scale; motion taken for poses "converged"
-    # with 7,978) make the record failed by the single fit's rule, whatever the solver said
+    # parameters that miss the points (gains 30x theirs; motion taken for poses "converged"
+    # with gains of 7,978) make the record failed, whatever the solver said
     p = np.asarray(fa.params.to_vector()).copy()
     p[:3] *= 30.0
     wild = eqx.tree_at(lambda f: f.params, fa, pl.AccelParams.from_vector(jnp.asarray(p)))
     bad = cj.AccelCalibration.from_fit(wild, ACC, 1.0)
     assert bool(wild.converged) and bad.status == "failed"
-    assert any("times the data's own scale" in w for w in bad.warnings)
+    assert any("no calibration of these points" in w for w in bad.warnings), bad.warnings
+    # counts about a 32768 offset: the gains are judged against the points' spread about the
+    # fitted offset, not their distance from zero (a review found 'failed' at 0.07x)
+    counts = 4096.0 * ACC + 32768.0
+    rec = cj.AccelCalibration.from_fit(FIT_A(jnp.asarray(counts), 1.0), counts, 1.0)
+    assert rec.status == "ok", rec.warnings
     # a g the fit was not given (a user's trial: 9.81 for a fit to 1 gave "ok", rms 0.898)
     wrong_g = cj.AccelCalibration.from_fit(fa, ACC, 9.81)
     assert wrong_g.status == "failed" and wrong_g.rms_after > 0.5
-    assert any("give from_fit the magnitude the fit was given" in w for w in wrong_g.warnings)
+    [said] = [w for w in wrong_g.warnings if "the magnitude the fit was given" in w]
+    assert abs(float(said.split("median |a| is ")[1].split(")")[0]) - 1.0) < 0.01, said
 
 
 def test_parameters_changed_in_a_pipeline_become_records(fits, tmp_path):
