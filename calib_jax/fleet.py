@@ -171,12 +171,12 @@ def _judge_mag(entry: dict, pts: np.ndarray, se_n: np.ndarray, options: dict) ->
     a 14 % radial error that calib-jax mag calls failed, 'do not use'). The status, the
     warnings and, for a downgraded entry, its message."""
     from .mag import POORLY_DETERMINED, judge_fit, poorly_determined
-    from .status import Status, is_usable, worst_status
+    from .status import NO_CALIBRATION, is_usable, worst_status
 
     # fitted, then refused by the batch's own shell checks (NO_SHELL, RAN_AWAY): the single
     # fit's judgement still gives the words and warnings calib-jax mag would
     p = np.asarray(entry["params"], float)
-    refused = entry.get("solver_status") in (Status.NO_SHELL, Status.RAN_AWAY)
+    refused = entry.get("solver_status") in NO_CALIBRATION
     refused &= bool(np.all(np.isfinite(p)))
     if not is_usable(entry["status"]) and not refused:
         return {}
@@ -212,13 +212,13 @@ def _judge_accel(entry: dict, info: dict, model: str) -> None:
 
     # parameters and standard errors in units of g: gains and cross terms over r / g,
     # biases over r
-    from .status import Status
+    from .status import NO_CALIBRATION
 
     r, g = info["fit_norm"], info["g"]
     scale = np.concatenate([np.full(6, r / g), np.full(3, r)])
     # fitted, then refused by the batch's shell checks (a walk taken for poses runs away):
     # the single fit's rule gives calib-jax accel's words for it
-    refused = entry.get("solver_status") in (Status.NO_SHELL, Status.RAN_AWAY)
+    refused = entry.get("solver_status") in NO_CALIBRATION
     if entry["status"] in ("ok", "not_converged") or refused:
         implausible = implausible_gains(np.asarray(entry["params"], float) / scale)
         if implausible:

@@ -50,6 +50,10 @@ class Status(enum.IntEnum):
     (one pose held still) lets any large ellipsoid through; no calibration."""
 
 
+NO_CALIBRATION = (Status.NO_SHELL, Status.RAN_AWAY)
+"""Fitted, then refused by the batch's and the pipeline's checks after the fit
+(:func:`calib_jax.geometry.shell_status`): parameters exist but are no calibration."""
+
 CONVERGED_STATUSES = (
     Status.CONVERGED_GRADIENT,
     Status.CONVERGED_PARAMETERS,
@@ -145,6 +149,6 @@ def fit_status(status: int, usable: bool = True) -> str:
     it (INSUFFICIENT_DATA, NO_COVERAGE, NO_SHELL, RAN_AWAY), or ``usable`` False),
     "not_converged" (the budget ran out) or "ok"; callers refine "ok" to "poorly_determined"."""
     bad = (Status.NONFINITE, Status.SINGULAR, Status.FAILED, Status.INSUFFICIENT_DATA)
-    if int(status) in bad + (Status.NO_COVERAGE, Status.NO_SHELL, Status.RAN_AWAY) or not usable:
+    if int(status) in (*bad, Status.NO_COVERAGE, *NO_CALIBRATION) or not usable:
         return "failed"
     return "ok" if is_converged(status) else "not_converged"
