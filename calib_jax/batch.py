@@ -46,7 +46,13 @@ from .accel import (
 )
 from .accel import MODELS as ACCEL_MODELS
 from .calibration import BatchRecord
-from .geometry import moments, normalised_moments, prefit_status, shell_status
+from .geometry import (
+    moments,
+    normalised_moments,
+    prefit_status,
+    shell_status,
+    stand_in_directions,
+)
 from .linalg import cholesky_small, det3, inv3
 from .lm import budget_apart, checked_solver_options, lm_solve, with_budget
 from .mag import FLAT_POINTS, ellipsoid_start_moments
@@ -311,20 +317,9 @@ def _batch_moments(raw, valid, chunk: int | None = None):
 
 
 def _unit_sphere_moments(dtype) -> jax.Array:
-    """Moments of 26 directions on the unit sphere: a stand-in problem for sensors that fail
-    the checks, so their (discarded) fit converges at once instead of holding the vmapped
-    loop to its iteration budget."""
-    d = np.array(
-        [
-            (i, j, k)
-            for i in (-1, 0, 1)
-            for j in (-1, 0, 1)
-            for k in (-1, 0, 1)
-            if (i, j, k) != (0, 0, 0)
-        ],
-        float,
-    )
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    """Moments of :func:`calib_jax.geometry.stand_in_directions`: the stand-in problem for
+    sensors that fail the checks."""
+    d = stand_in_directions()
     return moments(jnp.asarray(d, dtype), jnp.ones(len(d), dtype))
 
 

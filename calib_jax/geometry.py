@@ -120,6 +120,17 @@ def normalised_moments(x: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array
     return moments_from_power_sums(P, k), mean, k
 
 
+def stand_in_directions() -> np.ndarray:
+    """26 directions on the unit sphere (the cube's faces, edges and corners): the well-posed
+    problem the batch and the pipeline fit in place of data refused before the fit, so the
+    (discarded) solve converges at once instead of running to its iteration budget."""
+    d = np.array(
+        [(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if i or j or k],
+        float,
+    )
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
 NO_SHELL = 0.12
 """A fit whose relative RMS radial error is above this describes no ellipsoid shell: the
 samples are a noise cloud (a sensor held still, 28-39 %), motion, or a field that changed (a

@@ -61,12 +61,18 @@ from jaxtyping import Array, ArrayLike, Float, Int, Real
 
 from .accel import FLAT_POSES, fit_normalized
 from .attitude import gauss_newton_quaternion, reference_vectors
-from .geometry import centre_and_scale, moments, prefit_status, shell_status
+from .geometry import (
+    centre_and_scale,
+    moments,
+    prefit_status,
+    shell_status,
+    stand_in_directions,
+)
 from .gyro import _angles, _pad_motions, _pose_log, start_scale
 from .implicit import solve_implicit
 from .linalg import det3
 from .mag import FLAT_POINTS, fit_ellipsoid_normalized
-from .models.accel import AccelParams
+from .models.accel import AccelParams, alpha_matrix
 from .models.gyro import GyroParams, Motions, gravity_residual
 from .models.mag import N_PARAMS, natural_radius, raw_calibration, raw_covariance, unpack
 from .padding import bucket, stack_rows
@@ -298,14 +304,10 @@ def _refusal(g_ok, x, w, n_params: int, flat_below: float):
 
 
 def _stand_in(x, w, code):
-    """Unit-sphere points in place of refused samples, so that the solve that runs anyway
-    under jit is well posed and short (the batch substitutes unit-sphere moments)."""
-    n = x.shape[0]
-    k = np.arange(n) + 0.5  # a Fibonacci sphere: n directions spread evenly
-    z = 1.0 - 2.0 * k / n
-    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
-    r = np.sqrt(1.0 - z * z)
-    d = jnp.asarray(np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), x.dtype)
+    """The batch's stand-in directions (:func:`calib_jax.geometry.stand_in_directions`,
+    repeated to N rows) in place of refused samples, so that the solve that runs anyway under
+    jit is well posed and short."""
+    d = jnp.asarray(np.resize(stand_in_directions(), x.shape), x.dtype)
     refused = code >= 0
     return jnp.where(refused, d, x), jnp.where(refused, 1.0, w)
 
@@ -442,8 +444,8 @@ def _fit_accel(raw, magnitude, weights, *, update_type, max_iter, absolute_sigma
     p = jnp.concatenate([s * pn[:6], s * pn[6:] + m])
     params = AccelParams.from_vector(p)
     cov = s * s * res.covariance
-    # the semi-axes g eig(alpha) of the normalised fit, in units of the spread s
-    radius = g * jnp.cbrt(jnp.abs(det3(params.alpha / s)))
+    # the semi-axes g eig(alpha_n) of the normalised fit, in units of the spread s
+    radius = g * jnp.cbrt(jnp.abs(det3(alpha_matrix(pn))))
     return _refuse(_finish(params, res, cov, raw, w, g, radius), code)
 
 
@@ -511,14 +513,13 @@ def _fit_mag(raw, magnitude, weights, *, model, update_type, max_iter, absolute_
     params = MagParams(hard_iron=c, soft_iron=W)
     sg = jax.lax.stop_gradient  # the covariance is a constant under grad (see Fit)
     cov = raw_covariance(sg(res.params), res.covariance, model, m, s, sg(B))
+    r = natural_radius(unpack(res.params, model)[1])  # in units of the spread s
     if absolute_sigma:
         # The quadric residual e = r (|u|^2 - 1) is 2 r (|u| - 1) to first order, |u| - 1 being
         # the residual the weights are for (r = det(M_n)^(-1/6)): its covariance is 4 r^2 that
         # of the fit with the weights as given
-        r = natural_radius(unpack(res.params, model)[1])
-        cov = 4.0 * jax.lax.stop_gradient(r) ** 2 * cov
-    radius = natural_radius(unpack(res.params, model)[1])  # in units of the spread s
-    return _refuse(_finish(params, res, cov, raw, w, B, radius), code)
+        cov = 4.0 * sg(r) ** 2 * cov
+    return _refuse(_finish(params, res, cov, raw, w, B, r), code)
 
 
 @_full_float32
