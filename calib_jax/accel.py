@@ -630,6 +630,12 @@ def calibrate_accel(
         pose_table=report.kind == "pose_table",
     )
     warn += fit.warnings
+    refusal = fit.refusal  # gains no accelerometer has
+    if status in ("ok", "poorly_determined"):
+        refusal = undetermined(fit.stderr_n, model)
+        if refusal:
+            status = "failed"
+            warn.append(refusal)
 
     # errors before/after over interval means, noise floor from within-interval scatter
     x_static = x[report.mask & obs.valid]
@@ -684,8 +690,8 @@ def calibrate_accel(
         source=source,
     )
     if status in ("failed", "not_converged"):
-        _warnings.warn(
-            f"accelerometer calibration {status}: {cal.solver_message}",
+        _warnings.warn(  # a fit refused after it ran says why, not the solver's "converged"
+            f"accelerometer calibration {status}: {refusal or cal.solver_message}",
             FitStatusWarning,
             stacklevel=2,
         )
@@ -834,6 +840,43 @@ def implausible_gains(params_n) -> str | None:
     )
 
 
+UNDETERMINED_STDERR = 0.1
+"""A free parameter whose standard error exceeds this, in units of g, is not determined at all,
+and a fit with one is no calibration ("failed"): poses that cover less than a hemisphere
+(pms67's hand-tilted MPU-6050, tests/data/pms67_mpu6050: z gain 1.51 +- 0.157 and z bias
+-0.67 +- 0.157 g, a calibration that would move every reading by a third of g). Ten times
+POOR_STDERR: between them a fit is "poorly_determined", usable with its warning."""
+
+
+def undetermined(se_n, model: str) -> str | None:
+    """Why the poses leave the fit no calibration (None when they do not): some free
+    parameter's standard error in units of g exceeds UNDETERMINED_STDERR, or is not finite;
+    the one rule of the single fit and the batch. The advice names the poses each parameter
+    needs: a cross term, tilts between its two axes; an axis's gain and bias (unless a cross
+    term on that axis explains them), that axis up and down."""
+    free = np.asarray(MODELS[model])
+    se = np.asarray(se_n, float)
+    bad = [i for i in range(9) if free[i] and not se[i] <= UNDETERMINED_STDERR]
+    if not bad:
+        return None
+    worst = max(float(se[i]) for i in bad)
+    size = f"up to {worst:.0%} of g" if np.isfinite(worst) else "not finite"
+    pairs = [PARAM_NAMES[i][2:] for i in bad if 3 <= i <= 5]  # "xy", ...
+    # a gain collinear with an undetermined cross term is undetermined through it (poses
+    # turned about x and about y, never between: alpha_x, alpha_y and S_xy together)
+    axes = sorted({"xyz"[i % 3] for i in bad if i < 3 or i > 5} - set("".join(pairs)))
+    needs = [f"with the {a} axis pointing up and with it down" for a in axes]
+    needs += [f"tilted between the {a} and {b} axes" for a, b in pairs]
+    cross_only = not axes
+    return (
+        f"the poses do not determine {', '.join(PARAM_NAMES[i] for i in bad)} (standard errors "
+        f"{size}; a calibration needs under {POOR_STDERR:.0%}): the fit would move readings by "
+        f"as much. Add poses held still {', and '.join(needs)}"
+        + (", or fit gains and biases alone (--model accel6)" if cross_only else "")
+        + "; this is no calibration"
+    )
+
+
 def poorly_determined(se_n, model: str) -> list[str]:
     """The free parameters whose standard error in units of g (a unit-radius fit:
     gains and cross terms as they are, biases over the radius) exceeds POOR_STDERR; the one
@@ -851,12 +894,14 @@ class _NormalisedFit:
     params: np.ndarray
     cov: np.ndarray
     stderr: np.ndarray
+    stderr_n: np.ndarray  # in units of g (the unit-radius fit's)
     corr: np.ndarray
     condition: float
     solver_status: int
     status: str
     poor: list[str]
     warnings: list[str]
+    refusal: str | None  # why a fit that ran is no calibration
 
 
 def _fit_normalised(solver, model, opts, xpad, wpad, k, g, c_s) -> _NormalisedFit:
@@ -879,12 +924,14 @@ def _fit_normalised(solver, model, opts, xpad, wpad, k, g, c_s) -> _NormalisedFi
         params=params,
         cov=np.asarray(res.covariance, float) * np.outer(T, T),
         stderr=se_n * T,
+        stderr_n=se_n,
         corr=corr,
         condition=float(res.condition),
         solver_status=int(res.status),
         status=status,
         poor=poor,
         warnings=warn,
+        refusal=implausible,
     )
 
 

@@ -426,6 +426,8 @@ class AccelCalibration(SensorCalibration):
     def _improvement(self) -> str:
         """The headline after the errors: how much lower, unless that says nothing (a fit that
         did not converge, or one with no more fit points than parameters)."""
+        if self.status == "failed":  # the solver may have converged: its own words mislead
+            return "no calibration: the fit failed (the warnings say why)"
         if not is_usable(self.status):
             return f"no calibration: the fit is {self.status.replace('_', ' ')}"
         n_free = 6 if self.model == "accel6" else 9

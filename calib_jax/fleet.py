@@ -206,9 +206,10 @@ def _judge_accel(entry: dict, info: dict, model: str) -> None:
     """The single fit's status rule on a batch entry: a fit whose standard errors exceed 1 %
     of g is poorly determined, with the coverage warnings that say why (the batch called a
     one-hemisphere log with a z gain of 1.51 'ok' where calib-jax accel said so), and its rule
-    that gains no accelerometer has are no calibration (:func:`calib_jax.accel.
-    implausible_gains`)."""
-    from .accel import POORLY_DETERMINED, implausible_gains, poorly_determined
+    that gains no accelerometer has, or parameters the poses do not determine at all, are no
+    calibration (:func:`calib_jax.accel.implausible_gains`, :func:`calib_jax.accel.
+    undetermined`)."""
+    from .accel import POORLY_DETERMINED, implausible_gains, poorly_determined, undetermined
 
     # parameters and standard errors in units of g: gains and cross terms over r / g,
     # biases over r
@@ -227,7 +228,13 @@ def _judge_accel(entry: dict, info: dict, model: str) -> None:
             return
     if entry["status"] != "ok":
         return
-    poor = poorly_determined(np.asarray(entry["stderr"], float) / scale, model)
+    se_n = np.asarray(entry["stderr"], float) / scale
+    why = undetermined(se_n, model)
+    if why:
+        entry["status"] = "failed"
+        entry["message"] = why
+        return
+    poor = poorly_determined(se_n, model)
     if poor:
         entry["status"] = "poorly_determined"
         entry["message"] = POORLY_DETERMINED.format(", ".join(poor))

@@ -1040,16 +1040,21 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             f"accelerometer calibrated first on the {accel_rows}: {accel.n_intervals} static "
             f"poses, status {accel.status}, RMS (|a| - g)/g {accel.rms_after:.2g}"
         )
-        if accel.status == "poorly_determined":  # the gravity directions rest on it
-            warn.append(
-                "the accelerometer calibration the gyro fit rests on is poorly determined ("
-                + "; ".join(accel.warnings or [", ".join(accel.poorly_determined)])
-                + "): gravity directions from it carry its errors into the gyro's"
-            )
+    if accel.status == "poorly_determined":  # the gravity directions rest on it, given or not
+        warn.append(
+            "the accelerometer calibration the gyro fit rests on is poorly determined ("
+            + "; ".join(accel.warnings or [", ".join(accel.poorly_determined)])
+            + "): gravity directions from it carry its errors into the gyro's"
+        )
     if not accel.success:
         why = [w for w in accel.warnings if w.startswith(("all poses lie", "gravity hardly"))]
-        gains = [w for w in accel.warnings if w.startswith("the fitted gains are")]
-        # gains no accelerometer has: the solver's "raise the budget" would contradict them
+        gains = [
+            w
+            for w in accel.warnings
+            if w.startswith(("the fitted gains are", "the poses do not determine"))
+        ]
+        # gains no accelerometer has, or none determined: the solver's "raise the budget"
+        # would contradict them
         raise ValueError(
             "the accelerometer calibration "
             + ("failed" if accel.status == "failed" else "did not converge")

@@ -481,7 +481,12 @@ def calibrate_marg_log(
     method = accel
     if accel in ("auto", "static"):
         try:
-            acal = calibrate_accel(log, g=g, solver=solver, sensor_id=sensor_id, **static_options)
+            with warnings.catch_warnings():  # auto says below why it leaves a failed fit
+                if accel == "auto":
+                    warnings.simplefilter("ignore", FitStatusWarning)
+                acal = calibrate_accel(
+                    log, g=g, solver=solver, sensor_id=sensor_id, **static_options
+                )
             method = "static"
             if accel == "auto" and not acal.rms_after < REST_RMS_LIMIT:
                 # the detector finds short quiet moments in a tumble too

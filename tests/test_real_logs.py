@@ -1,5 +1,6 @@
 """Regression on real measured logs in ../shared/data (each folder's NOTES.md says what it is)."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 
 import calib_jax as cj
+from calib_jax.calibration import FitStatusWarning
 from calib_jax.cli import demo_log_path, main
 from calib_jax.marg import calibrate_marg_log
 
@@ -349,15 +351,17 @@ def test_a_hand_held_walk_fitted_as_poses_is_no_calibration(tmp_path, capsys):
     assert entry["status"] == "failed" and "the fitted gains are" in entry["message"], entry
 
 
-def test_a_hand_tilted_log_is_no_gyro_calibration(tmp_path):
+def test_a_hand_tilted_log_is_no_calibration(tmp_path, capsys):
     """pms67/Attitude-Estimation's MPU-6050 (tests/data/pms67_mpu6050/NOTES.md, MIT), tilted by
     hand within about 75 deg of up. diagnose said "at_floor ... nothing beyond noise" and nothing
     of the one-sided poses; it now says the base calibration is poorly determined and why, in
     calib-jax accel's words. Split into a phone's two files (the gyro at half the rate, on its
     own clock), calibrate_gyro "found" a scale asymmetry of s_z = -2.4 +- 3.4 (F = 95) and
-    returned a z scale of 0.14 with no warning: an asymmetry or its error beyond
-    gyro.ASYMMETRY_PLAUSIBLE (0.1) is not applied, and the accelerometer fit the gyro rests
-    on, poorly determined, is a warning."""
+    returned a z scale of 0.14 with no warning. The accelerometer fit it rests on leaves
+    alpha_z and beta_z +- 0.15 g (beta_z -0.67 g), no calibration (accel.UNDETERMINED_STDERR),
+    so the gyro fit is refused and says why. Given that fit anyway (its status overridden, as
+    a user's own accelerometer calibration would come), an asymmetry or its error beyond
+    gyro.ASYMMETRY_PLAUSIBLE (0.1) is not applied, and the accelerometer fit is a warning."""
     path = Path(__file__).parent / "data" / "pms67_mpu6050" / "imu_data.csv"
     from calib_jax.diagnose import diagnose_accel
 
@@ -365,6 +369,18 @@ def test_a_hand_tilted_log_is_no_gyro_calibration(tmp_path):
     assert d.verdict == "at_floor"
     assert any("the base calibration itself is poorly determined" in n for n in d.notes)
     assert any(n.startswith("the poses: all poses lie within") for n in d.notes), d.notes
+
+    # calib-jax accel and batch: no calibration, exit 1, the same words (they said
+    # "poorly_determined", exit 0, for a z gain of 1.51 and a z bias of -0.67 g)
+    assert main(["accel", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert "no calibration: the fit failed" in out and "status: failed" in out, out
+    assert "the poses do not determine alpha_z, beta_z (standard errors up to 1" in out, out
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / path.name).write_bytes(path.read_bytes())
+    assert main(["batch", str(tmp_path / "logs"), "--no-progress"]) == 1
+    out = capsys.readouterr().out
+    assert "imu_data.csv: failed: the poses do not determine alpha_z, beta_z" in out, out
 
     raw = np.loadtxt(path, delimiter=",", skiprows=1)
     t, acc, rate = raw[:, 0], raw[:, 1:4] * 9.80665, np.radians(raw[:, 4:7])
@@ -376,9 +392,20 @@ def test_a_hand_tilted_log_is_no_gyro_calibration(tmp_path):
         rows = np.column_stack([tt, v, np.linalg.norm(v, axis=1)])
         header = head.format(what, unit)
         np.savetxt(tmp_path / name, rows, delimiter=",", header=header, comments="")
-    cal = cj.calibrate_gyro(
-        cj.load_log(tmp_path / "Accelerometer.csv"), cj.load_log(tmp_path / "Gyroscope.csv")
-    )
+    acc_log = cj.load_log(tmp_path / "Accelerometer.csv")
+    gyro_log = cj.load_log(tmp_path / "Gyroscope.csv")
+    with (
+        pytest.raises(ValueError, match="the accelerometer calibration failed") as refused,
+        pytest.warns(FitStatusWarning),
+    ):
+        cj.calibrate_gyro(acc_log, gyro_log)
+    assert "the poses do not determine alpha_z, beta_z" in str(refused.value)
+    assert "with the z axis pointing up and with it down" in str(refused.value)
+    with pytest.warns(FitStatusWarning):
+        accel = cj.calibrate_accel(acc_log)
+    assert accel.status == "failed" and accel.stderr[8] / accel.g > 0.1, accel.stderr
+    accel = dataclasses.replace(accel, status="poorly_determined")
+    cal = cj.calibrate_gyro(acc_log, gyro_log, accel=accel)
     asym = cal.effects["scale_asymmetry"]
     assert asym["significant"] and not asym["accepted"], asym
     assert np.all(cal.scale_asymmetry == 0.0)
