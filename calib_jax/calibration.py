@@ -1070,6 +1070,17 @@ class MagCalibration(SensorCalibration):
             return ""
         return f"; {self.rms_raw_pct:.3f} % uncentred"
 
+    def _unit_by_size(self) -> str:
+        """Where no unit was given, the one a magnetometer's radius says: Earth's field is
+        25-65 uT, 0.25-0.65 gauss, 250-650 mG (a trial read 'radius after 0.532 raw
+        units' of a gauss log)."""
+        if self.units or not self.sensor == "mag" or not np.isfinite(self.radius):
+            return ""
+        for lo, unit in ((0.25, "gauss"), (25.0, "uT"), (250.0, "mG")):
+            if 0.8 * lo <= self.radius <= 1.2 * 2.6 * lo:
+                return f"; Earth's field in {unit}, by its size"
+        return ""
+
     def report(self) -> str:
         unit = self.units or "raw units"
         c, sc = self.center, self.stderr_center
@@ -1091,7 +1102,7 @@ class MagCalibration(SensorCalibration):
             + (
                 " (the given field magnitude, in its units)"
                 if self.field is not None
-                else f" {unit} (det W = 1)"
+                else f" {unit} (det W = 1{self._unit_by_size()})"
             ),
             f"RMS of (|m| - r)/r: before {self.rms_before_pct:.3f} % (centred on the data "
             f"mean{self._uncentred()}), after {self.rms_after_pct:.3f} %",

@@ -953,6 +953,44 @@ def test_json_list_lines_read_with_the_time_column_where_it_rises(tmp_path):
     assert any("1 rows had the wrong number of fields" in n for n in log.notes)
 
 
+def test_json_exports_are_read_by_their_arrays_names(tmp_path):
+    """A JSON export was read as one text row (a Unlicense'd cave-surveying device's
+    calibration file: "no header and 583 columns", 9,992 characters, and a --columns example
+    of 580 underscores that led to "no finite samples"). Now a JSON document is read by the
+    names of its numeric arrays, as a MATLAB file's variables are: a list of records (and
+    JSON Lines of them) by its keys, an object's arrays by their last key, an N x 3 'acc'; a
+    document whose arrays name no sensor is refused in one line naming them. The samples
+    must come back exactly as written (JSON keeps a float64's 17 digits)."""
+    import json
+
+    rng = np.random.default_rng(5)
+    t = np.arange(200) / 50.0
+    acc = rng.normal(size=(200, 3))
+    records = [
+        {"t": a, "ax": b[0], "ay": b[1], "az": b[2], "id": "x"} for a, b in zip(t, acc, strict=True)
+    ]
+    nested = {"device": "imu", "data": {"time": t.tolist(), "acc": acc.tolist()}}
+    lines = "\n".join(json.dumps(r) for r in records) + "\n"
+    for name, text in (
+        ("records.json", json.dumps(records)),
+        ("nested.json", json.dumps(nested)),
+        ("lines.jsonl", lines),
+    ):
+        log = load_log(_write(tmp_path, text, name))
+        np.testing.assert_array_equal(log.acc, acc, err_msg=name)
+        np.testing.assert_allclose(log.sample_rate, 50.0, rtol=1e-9, err_msg=name)
+        assert any("JSON document" in n for n in log.notes), (name, log.notes)
+    shots = {"shots": {"grav": acc.ravel().tolist(), "mag": acc.ravel().tolist()}}
+    with pytest.raises(ValueError, match=r"which JSON array .*found: shots\.grav 600") as e:
+        load_log(_write(tmp_path, json.dumps(shots), "ab.json"))
+    assert len(str(e.value)) < 300, str(e.value)
+    # a text log opening with a bracketed section name is still read as text
+    rows = "[Data]\nt,ax,ay,az\n" + "".join(
+        f"{a},{b[0]},{b[1]},{b[2]}\n" for a, b in zip(t, acc, strict=True)
+    )
+    np.testing.assert_array_equal(load_log(_write(tmp_path, rows, "sectioned.csv")).acc, acc)
+
+
 def test_a_headerless_time_layout_without_a_rising_column_is_refused(tmp_path):
     """Ten headerless columns read as t then nine sensor columns; when neither the first
     column nor the last rises, no clock is made from a sensor axis (it was: accelerometer x
@@ -1191,6 +1229,12 @@ def test_a_file_named_for_one_sensor_gives_its_bare_columns_that_sensor(tmp_path
     # headerless: a 4-column file named for the gyroscope
     np.savetxt(tmp_path / "xsens_gyro.txt", rows[:, [1, 2, 3, 4]])
     assert load_log(tmp_path / "xsens_gyro.txt").gyro is not None
+    # the positional advice names the time column the file was read with (it said --columns
+    # ax,ay,az, which read the time as ax; a trial on sunsided/sensor-fusion's 4-column files)
+    with pytest.raises(ValueError, match=r"headerless file: --columns t,ax,ay,az\)"):
+        load_log(tmp_path / "xsens_gyro.txt", sensor="accel")
+    advised = load_log(tmp_path / "xsens_gyro.txt", columns="t,ax,ay,az")
+    np.testing.assert_array_equal(advised.acc, rows[:, 2:5])
     named = {
         "xsens_gyro.mat": "gyro",
         "Accelerometer.csv": "accel",

@@ -540,3 +540,22 @@ def test_the_uncentred_before_is_left_out_where_the_offset_dwarfs_the_field():
         line = next(ln for ln in cal.report().splitlines() if ln.startswith("RMS of"))
         assert ("uncentred" in line) is shown, line
         assert np.isfinite(cal.rms_raw_pct)  # kept in the record either way
+
+
+def test_a_report_without_units_names_the_unit_the_radius_says():
+    """A trial's gauss log (sunsided/sensor-fusion's HMC5883L) read "radius after 0.532035 raw
+    units": Earth's field is 25-65 uT, that is 0.25-0.65 gauss or 250-650 mG, so a radius in
+    one of those ranges names its unit, by its size; a unit given, or a radius in none of
+    them (counts), names none. Truth: the simulated radius."""
+    d = random_directions(600, np.random.default_rng(2))
+    for radius, said in ((0.53, "gauss"), (48.0, "uT"), (480.0, "mG"), (1500.0, None)):
+        x = radius * d + [0.1 * radius, -0.2 * radius, 0.05 * radius]
+        cal = calibrate_mag(x, model="sphere")
+        assert abs(cal.radius / radius - 1) < 1e-6, cal.radius
+        hint = [line for line in cal.report().splitlines() if "by its size" in line]
+        if said is None:
+            assert not hint, hint
+        else:
+            assert len(hint) == 1 and f"Earth's field in {said}, by its size" in hint[0], hint
+        given = calibrate_mag(x, model="sphere", units="counts")
+        assert "by its size" not in given.report()

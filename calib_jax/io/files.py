@@ -29,6 +29,9 @@ Supported:
   ``.mat`` files are text and are read as text): variables named like columns (``ax``,
   ``acc_x``, ...), N x 3 matrices named for a sensor (``acc``, ``gyro``, ``mag``) or one N x k
   matrix read like headerless text.
+* JSON exports, by the same names: a list of records (``[{"t": 0.0, "ax": ...}, ...]``), JSON
+  Lines of them, or an object whose (nested) arrays are named like columns or sensors; other
+  documents get an error naming their numeric arrays.
 * HDF5 in the BROAD benchmark's layout (``imu_acc``, ``imu_gyr``, ``imu_mag``, the rate in the
   ``sampling_rate`` attribute), through h5py (``pip install 'calib_jax[hdf5]'``); its optical
   truth is read by :func:`calib_jax.io.broad.load_broad`. Other HDF5 layouts: an error naming
@@ -118,12 +121,17 @@ class OtherSensorsFile(ValueError):
 
 
 def _sensor_of_bare_columns(
-    path, sensor: str | None, what: str, names: tuple[str, str, str] = ("x", "y", "z")
+    path,
+    sensor: str | None,
+    what: str,
+    names: tuple[str, str, str] = ("x", "y", "z"),
+    timed: bool = False,
 ) -> tuple[str | None, str]:
     """Which sensor columns that name none (``what``: 'columns x, y, z' or 'headerless 3
     columns') hold: the command's, else the one the file's name names; and why, for the note.
     A name that names another sensor than the command's is refused: a phone's Gyroscope.csv
-    read by calib-jax mag would be calibrated as a magnetometer."""
+    read by calib-jax mag would be calibrated as a magnetometer. ``timed``: a headerless
+    file's first column is its time (four columns), which a positional --columns must name."""
     named = sensor_named_by(path)
     if named is None or (sensor is not None and _SENSORS[named] == _SENSORS[sensor]):
         return sensor, ""
@@ -147,7 +155,7 @@ def _sensor_of_bare_columns(
             f"'{p}{a}={n}'" if " " in n else f"{p}{a}={n}"
             for a, n in zip("xyz", names, strict=True)
         )
-        + f" (by position for a headerless file: --columns {p}x,{p}y,{p}z)"
+        + f" (by position for a headerless file: --columns {'t,' * timed}{p}x,{p}y,{p}z)"
     )
 
 
@@ -1174,12 +1182,85 @@ def _read_mat(raw: bytes, path: Path, notes: list[str]) -> _Table:
         and v.dtype.kind in "fiub"
         and v.size
     }
+    return _table_of_arrays(arrays, path, notes, "MATLAB variable")
+
+
+def _json_arrays(obj, name: str = "") -> dict[str, np.ndarray]:
+    """The numeric arrays of a parsed JSON document by dotted path: a list of numbers (null
+    read as NaN), a list of equal-length lists of numbers (a matrix), and a list of records
+    (objects), one array per key whose values are numbers; objects are walked into."""
+
+    def number(v) -> bool:
+        return v is None or (isinstance(v, int | float) and not isinstance(v, bool))
+
+    def at(key: str) -> str:
+        return f"{name}.{key}" if name else key
+
+    out: dict[str, np.ndarray] = {}
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            out.update(_json_arrays(v, at(str(k))))
+    elif isinstance(obj, list) and obj:
+        if all(number(v) for v in obj):
+            out[name or "[]"] = np.array([np.nan if v is None else v for v in obj], float)
+        elif all(isinstance(v, list) and v and all(number(x) for x in v) for v in obj):
+            if len({len(v) for v in obj}) == 1:
+                rows = [[np.nan if x is None else x for x in v] for v in obj]
+                out[name or "[]"] = np.array(rows, float)
+        elif all(isinstance(v, dict) for v in obj):
+            keys = dict.fromkeys(k for v in obj for k in v)  # first-seen order
+            for k in keys:
+                vals = [v.get(k) for v in obj]
+                if all(number(x) for x in vals) and any(x is not None for x in vals):
+                    out[at(str(k))] = np.array([np.nan if x is None else x for x in vals], float)
+    return out
+
+
+def _looks_like_json(raw: bytes) -> bool:
+    return raw.lstrip(b"\xef\xbb\xbf \t\r\n")[:1] in (b"{", b"[")
+
+
+def _parse_json(raw: bytes):
+    """The parsed document; JSON Lines of objects as their list; None where the text is no
+    JSON (a text log whose first line is a bracketed section name, '[Data]', and one JSON list
+    per line, micropython-fusion's, are read as text)."""
+    import json
+
+    try:
+        text = raw.decode("utf-8-sig")
+        return json.loads(text)
+    except (UnicodeDecodeError, ValueError):
+        pass
+    try:
+        lines = [json.loads(line) for line in text.splitlines() if line.strip()]
+    except ValueError:
+        return None
+    return lines if lines and all(isinstance(v, dict) for v in lines) else None
+
+
+def _read_json(doc, path: Path, notes: list[str]) -> _Table:
+    """A JSON export: its numeric arrays (:func:`_json_arrays`) read as a MATLAB file's
+    variables are, by name (``ax``, ``acc_x``; an N x 3 ``acc``); a list of records by its keys.
+    Before, a JSON file was read as one text row of hundreds of columns."""
+    arrays = {k: v for k, v in _json_arrays(doc).items() if v.size}
+    notes.append("JSON document, read by the names of its numeric arrays")
+    return _table_of_arrays(arrays, path, notes, "JSON array")
+
+
+def _table_of_arrays(
+    arrays: dict[str, np.ndarray], path: Path, notes: list[str], what: str
+) -> _Table:
+    """Named numeric arrays (a MATLAB file's variables, a JSON document's arrays) as a table:
+    arrays named like columns (``ax``, ``acc_x``) or an N x 3 matrix named for a sensor
+    (``acc``), else the one N x k matrix. ``what`` names them in messages ("MATLAB variable")."""
     cols: dict[str, np.ndarray] = {}
     for k, v in arrays.items():
-        canon = canonical_name(k)
-        if canon is not None and v.ndim <= 2 and min(v.shape or (1,)) == 1 and canon not in cols:
+        leaf = k.rsplit(".", 1)[-1]  # a JSON path's last key
+        canon = canonical_name(leaf)
+        vector = v.ndim == 1 or (v.ndim == 2 and min(v.shape) == 1)
+        if canon is not None and vector and canon not in cols:
             cols[canon] = v.ravel()
-        sensor = _MATRIX_NAMES.get(_clean(k))
+        sensor = _MATRIX_NAMES.get(_clean(leaf))
         if sensor is not None and v.ndim == 2 and 3 in v.shape:
             m = v if v.shape[1] == 3 else v.T
             for i, a in enumerate("xyz"):
@@ -1190,20 +1271,26 @@ def _read_mat(raw: bytes, path: Path, notes: list[str]) -> _Table:
         left = sorted(k for k, v in cols.items() if len(v) != n)
         if left:
             notes.append(
-                "MATLAB variables left out for a different length than the "
+                f"{what}s left out for a different length than the "
                 f"{n} samples of the others: " + ", ".join(f"{k} ({len(cols[k])})" for k in left)
             )
         names = [k for k in cols if len(cols[k]) == n]
         return _Table(names, np.column_stack([cols[k] for k in names]))
     mats = [v for v in arrays.values() if v.ndim == 2 and min(v.shape) >= 3]
     if len(mats) != 1:
-        found = ", ".join(f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items())
+        found = [f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items()]
+        if len(found) > 12:
+            found = [*found[:12], f"and {len(found) - 12} more"]
         raise ValueError(
-            f"{path}: cannot tell which MATLAB variable holds the data (found: "
-            f"{found or 'no numeric variables'}); save one N x k matrix or variables named "
-            "ax, ay, az (or an N x 3 'acc')"
+            f"{path}: cannot tell which {what} holds the data (found: "
+            f"{', '.join(found) or f'no numeric {what}s'}); save one N x k matrix or "
+            f"{what}s named ax, ay, az (or an N x 3 'acc')"
         )
-    m = mats[0]
+    [(name, m)] = [(k, v) for k, v in arrays.items() if v.ndim == 2 and min(v.shape) >= 3]
+    notes.append(
+        f"{what} {name} ({'x'.join(map(str, m.shape))}) holds the data; its columns are read as "
+        "a headerless file's"
+    )
     if m.shape[0] < m.shape[1]:
         m = m.T
     return _Table(None, m)
@@ -1436,6 +1523,7 @@ def load_log(
         and path.suffix.lower() != ".mat"
         and not any(raw[0].startswith(m) for m, *_ in _COMPRESSED)
         and not _is_mat(raw[0], path)
+        and not _looks_like_json(raw[0])
     )
     if lazy:
         # a big file that is not compressed and not a MAT file: read its ends only, numpy's
@@ -1451,6 +1539,8 @@ def load_log(
     elif path.suffix.lower() == ".mat" and b"\0" in raw[:4096]:
         # a binary .mat without the version-5 text header: MATLAB v4
         tab = _read_mat(raw, path, notes)
+    elif _looks_like_json(raw) and (doc := _parse_json(raw)) is not None:
+        tab = _read_json(doc, path, notes)
     else:
         tab = _read_text(path, raw, not compressed, notes, max_rows=max_rows)
     return _assemble(path, tab, mapping, sensor, sample_rate, notes, instance)
@@ -1650,7 +1740,9 @@ def _assemble(
     elif mapping is None:
         by_name = ""
         if width in (3, 4):  # one sensor's x, y, z (and a time): which, the name may say
-            which, by_name = _sensor_of_bare_columns(path, sensor, f"headerless {width} columns")
+            which, by_name = _sensor_of_bare_columns(
+                path, sensor, f"headerless {width} columns", timed=width == 4
+            )
             sensor = which
         guess = _guess(width, sensor)
         if width in (6, 7) and _last_three_held(data):
@@ -1926,15 +2018,19 @@ def _rising(col: np.ndarray) -> bool:
 
 
 def _describe_columns(data: np.ndarray) -> str:
-    """Each column's range, and which only rise (time?): what a user needs to map them."""
+    """Each column's range, and which only rise (time?): what a user needs to map them; the
+    first 16 of a wider file (a JSON document read as one row of 583 was 9,992 characters)."""
     parts = []
-    for j in range(data.shape[1]):
+    shown = 16 if data.shape[1] > 20 else data.shape[1]
+    for j in range(shown):
         c = data[:, j][np.isfinite(data[:, j])]
         if c.size == 0:
             parts.append(f"{j + 1}: empty")
             continue
         rng = f"{c.min():.4g}..{c.max():.4g}"
         parts.append(f"{j + 1}: {rng}" + (" rising (time?)" if _rising(data[:, j]) else ""))
+    if shown < data.shape[1]:
+        parts.append(f"... and {data.shape[1] - shown} more")
     return "columns " + ", ".join(parts)
 
 
