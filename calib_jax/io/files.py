@@ -1228,8 +1228,11 @@ def _parse_json(raw: bytes):
 
     try:
         text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return None
+    try:
         return json.loads(text)
-    except (UnicodeDecodeError, ValueError):
+    except ValueError:
         pass
     try:
         lines = [json.loads(line) for line in text.splitlines() if line.strip()]
