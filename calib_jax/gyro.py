@@ -1048,7 +1048,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         )
     if not accel.success:
         why = [w for w in accel.warnings if w.startswith(("all poses lie", "gravity hardly"))]
-        gains = [
+        refusals = [
             w
             for w in accel.warnings
             if w.startswith(("the fitted gains are", "the poses do not determine"))
@@ -1059,7 +1059,7 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
             "the accelerometer calibration "
             + ("failed" if accel.status == "failed" else "did not converge")
             + " ("
-            + "; ".join(gains + why if gains else [accel.solver_message, *why])
+            + "; ".join(refusals + why if refusals else [accel.solver_message, *why])
             + "): the gravity directions the gyro is fitted to would be wrong; fix the "
             "accelerometer fit first"
             + (

@@ -1279,7 +1279,7 @@ def _table_of_arrays(
             )
         names = [k for k in cols if len(cols[k]) == n]
         return _Table(names, np.column_stack([cols[k] for k in names]))
-    mats = [v for v in arrays.values() if v.ndim == 2 and min(v.shape) >= 3]
+    mats = [(k, v) for k, v in arrays.items() if v.ndim == 2 and min(v.shape) >= 3]
     if len(mats) != 1:
         found = [f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items()]
         if len(found) > 12:
@@ -1289,7 +1289,7 @@ def _table_of_arrays(
             f"{', '.join(found) or f'no numeric {what}s'}); save one N x k matrix or "
             f"{what}s named ax, ay, az (or an N x 3 'acc')"
         )
-    [(name, m)] = [(k, v) for k, v in arrays.items() if v.ndim == 2 and min(v.shape) >= 3]
+    [(name, m)] = mats
     notes.append(
         f"{what} {name} ({'x'.join(map(str, m.shape))}) holds the data; its columns are read as "
         "a headerless file's"
