@@ -28,6 +28,12 @@ LOG_SUFFIXES = tuple(base + z for base in (".csv", ".tsv") for z in ("", ".gz", 
 """What ``calib-jax batch`` reads without --pattern: tables and MATLAB files (not .txt, which
 holds READMEs and licences as often as logs)."""
 _LOG_NAMES = ".csv, .tsv (also gzip, bzip2 or xz compressed) or .mat"
+_DOC_SUFFIXES = frozenset(
+    ".md .rst .txt .pdf .png .jpg .jpeg .gif .svg .html .py .ipynb .json .yaml .yml .toml".split()
+)
+"""Suffixes of what sits beside logs (a NOTES.md, a plot, a calibration written earlier):
+never the ones ``batch`` proposes to read, nor counted as logs it left out. .txt counts as a
+log only when the folder holds nothing else."""
 
 # ---------------------------------------------------------------------------------------------
 # option types: a bad value is a usage error (exit 2) naming the option and the value
@@ -381,14 +387,21 @@ def run_batch(args: argparse.Namespace) -> int:
                 f"no files matching {wanted} under {root}: its {len(every)} file(s) have no "
                 "suffix; name them with --pattern (e.g. --pattern '*')"
             )
-        common = suffixes.most_common(1)[0][0]
         found = ", ".join(f"{n} {sfx}" for sfx, n in suffixes.most_common(4))
+        data = [(n, sfx) for sfx, n in suffixes.most_common() if sfx not in _DOC_SUFFIXES]
+        data = data or [(n, sfx) for sfx, n in suffixes.most_common() if sfx == ".txt"]
+        if not data:
+            raise ValueError(
+                f"no files matching {wanted} under {root}; it holds {len(every)} file(s) "
+                f"({found}), none of them a log by its name; name the logs with --pattern"
+            )
+        common = data[0][1]
         raise ValueError(
             f"no files matching {wanted} under {root}; it holds {len(every)} file(s) ({found}): "
             f"--pattern '*{common}' takes the {common} ones"
         )
     chosen = set(paths)
-    others = [p for p in every if str(p) not in chosen]
+    others = [p for p in every if str(p) not in chosen and p.suffix.lower() not in _DOC_SUFFIXES]
     options = {}
     if args.sensor == "accel":
         options.update(g=args.g, model=args.model or "accel9")

@@ -1359,3 +1359,74 @@ def test_a_header_naming_two_sensors_says_so_and_how_to_read_the_second(tmp_path
     other = load_log(p, columns=columns)
     np.testing.assert_array_equal(other.acc, right[:, :3])
     np.testing.assert_array_equal(other.gyro, right[:, 3:])
+
+
+def _dataflash_row(name, *values) -> str:
+    """One message line as ArduPilot writes it; floats by repr, so they read back exactly."""
+    cells = [str(v) if isinstance(v, int | np.integer) else repr(float(v)) for v in values]
+    return ", ".join([name, *cells])
+
+
+def test_ardupilot_text_logs_are_read_by_message(tmp_path):
+    """ArduPilot's dataflash text log (Mission Planner's .log; a new-user trial on ArduPilot's
+    own example log, ArduCopter 3.1, GPL-3.0, not shipped: this file has its shape) was read
+    as one table of the rows of the commonest width: IMU, IMU2, ATT and CURR ran together as
+    "no header and 8 columns", and the --columns advice put ax on the messages' names. Now the
+    FMT lines name each message's columns: the IMU's accelerometer and gyroscope, IMU2 as
+    instance 1, MAG (at a fifth of the IMU's rate) for the magnetometer with the IMU row
+    nearest in time beside each row, a compass's 0, 0, 0 rows read as NaN, and later
+    firmware's instance column I. Every value must come back exactly as written."""
+    rng = np.random.default_rng(7)
+    n = 200
+    t_ms = 95892 + 20 * np.arange(n)  # 50 Hz
+    gyr, acc, acc2 = (rng.normal(size=(n, 3)) for _ in range(3))
+    mag = 300 * rng.normal(size=(n // 5, 3))
+    mag[:3] = 0.0  # the compass not yet answering
+    t_mag = t_ms[::5] + 3
+    lines = [
+        "ArduCopter V3.1",
+        "",
+        "FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format",
+        "FMT, 131, 31, IMU, Iffffff, TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ",
+        "FMT, 135, 31, IMU2, Iffffff, TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ",
+        "FMT, 1, 19, ATT, IccccCC, TimeMS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw",
+        "FMT, 15, 25, MAG, Ihhhhhhhhh, TimeMS,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOfsX,MOfsY,MOfsZ",
+        "PARM, SYSID_SW_MREV, 120",
+    ]
+    for i in range(n):
+        lines.append(_dataflash_row("IMU", t_ms[i], *gyr[i], *acc[i]))
+        lines.append(_dataflash_row("IMU2", t_ms[i], *gyr[i], *acc2[i]))
+        lines.append(_dataflash_row("ATT", t_ms[i], 1, 2, 3, 4, 5, 6))  # as wide as IMU
+        if i % 5 == 0:
+            lines.append(_dataflash_row("MAG", t_mag[i // 5], *mag[i // 5], *[0] * 6))
+    path = _write(tmp_path, "\n".join(lines) + "\n", "00000012.log")
+
+    log = load_log(path)
+    np.testing.assert_array_equal(log.acc, acc)
+    np.testing.assert_array_equal(log.gyro, gyr)
+    assert log.mag is None and log.units == {"accel": "m/s^2", "gyro": "rad/s"}
+    np.testing.assert_allclose(log.sample_rate, 50.0, rtol=1e-9)
+    assert any("ArduPilot log: read message IMU and IMU2" in s for s in log.notes), log.notes
+    assert any("magnetometer (MAG" in s for s in log.notes), log.notes
+    np.testing.assert_array_equal(load_log(path, instance=1).acc, acc2)
+
+    mlog = load_log(path, sensor="mag")
+    np.testing.assert_array_equal(mlog.mag[3:], mag[3:])
+    assert np.isnan(mlog.mag[:3]).all()
+    np.testing.assert_array_equal(mlog.acc, acc[::5])  # the IMU rows 3 ms before each MAG row
+    np.testing.assert_allclose(mlog.sample_rate, 10.0, rtol=1e-9)
+    assert any("3 magnetometer rows of 0, 0, 0" in s for s in mlog.notes), mlog.notes
+
+    # later firmware: one IMU message with an instance column I, time in microseconds
+    fmt = "FMT, 172, 43, IMU, QBffffff, TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"
+    rows = [fmt, "FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns", lines[5]]
+    for i in range(n):
+        rows += [_dataflash_row("IMU", 1000 * int(t_ms[i]), k, *gyr[i], *a[i]) for k, a in
+                 enumerate((acc, acc2))]  # fmt: skip
+    new = _write(tmp_path, "\n".join(rows) + "\n", "00000013.log")
+    np.testing.assert_array_equal(load_log(new).acc, acc)
+    np.testing.assert_array_equal(load_log(new, instance=1).acc, acc2)
+
+    with pytest.raises(ValueError, match=r"ArduPilot log whose messages carry no accel.*ATT 200"):
+        att = [line for line in lines if line.startswith(("FMT", "ATT"))]
+        load_log(_write(tmp_path, "\n".join(att) + "\n", "att.log"))

@@ -204,11 +204,13 @@ def test_batch_reads_compressed_logs_and_names_what_it_left_out(fleet_dir, tmp_p
     d.mkdir()
     (d / "imu0.csv.gz").write_bytes(gzip.compress((src / "imu0.csv").read_bytes()))
     (d / "NOTES.md").write_text("where the logs came from\n")
+    (d / "imu1.dat").write_text("1 2 3\n")
     out = tmp_path / "b.json"
     assert main(["batch", str(d), "--json", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "1 file under" in printed and "left out: 1 other file(s)" in printed
-    assert "NOTES.md; set --pattern to read them" in printed
+    # what sits beside logs (NOTES.md, a plot, a calibration written earlier) is not named
+    assert "imu1.dat; set --pattern to read them" in printed and "NOTES.md" not in printed
     (entry,) = json.loads(out.read_text())["results"]
     assert entry["status"] == "ok" and entry["path"].endswith("imu0.csv.gz")
     # files named on the command line are read as they are, beside folders (`batch logs/*`
@@ -317,6 +319,17 @@ def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "it holds 4 file(s) (3 .txt, 1 .md): --pattern '*.txt' takes the .txt ones" in err
+    # an ArduPilot .log beside its NOTES.md: the pattern offered was '*.md' (a new-user trial)
+    other = tmp_path / "flight"
+    other.mkdir()
+    (other / "00000012.log").write_text("FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format\n")
+    (other / "NOTES.md").write_text("notes\n")
+    assert main(["batch", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert "(1 .log, 1 .md): --pattern '*.log' takes the .log ones" in err
+    (other / "00000012.log").unlink()
+    assert main(["batch", str(other)]) == 2
+    assert "none of them a log by its name; name the logs with --pattern" in capsys.readouterr().err
 
 
 def test_batch_prints_the_warning_of_a_log_it_calibrated(tmp_path, capsys):

@@ -32,6 +32,8 @@ Supported:
 * JSON exports, by the same names: a list of records (``[{"t": 0.0, "ax": ...}, ...]``), JSON
   Lines of them, or an object whose (nested) arrays are named like columns or sensors; other
   documents get an error naming their numeric arrays.
+* ArduPilot dataflash logs in text form (``FMT`` lines, then one message a line), by message
+  (:mod:`calib_jax.io.dataflash`).
 * HDF5 in the BROAD benchmark's layout (``imu_acc``, ``imu_gyr``, ``imu_mag``, the rate in the
   ``sampling_rate`` attribute), through h5py (``pip install 'calib_jax[hdf5]'``); its optical
   truth is read by :func:`calib_jax.io.broad.load_broad`. Other HDF5 layouts: an error naming
@@ -60,6 +62,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from .dataflash import looks_like_dataflash, read_dataflash
 
 _CANON = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp")
 
@@ -1520,6 +1524,10 @@ def load_log(
     raw = _read_bytes(path, ends=_HEAD_CHARS)
     if raw[0].startswith(_HDF5_MAGIC):
         return _read_hdf5(path, sample_rate, max_rows)
+    if looks_like_dataflash(raw[0][:_HEAD_CHARS].decode("latin-1")):
+        text = _decode(_read_bytes(path), path, notes)[0]
+        tab = read_dataflash(text, path, sensor, notes)
+        return _assemble(path, tab, mapping, sensor, sample_rate, notes, instance)
     big = len(raw[1]) == _HEAD_CHARS // 2 and len(raw[0]) == _HEAD_CHARS
     lazy = (
         big
