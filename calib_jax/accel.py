@@ -253,13 +253,24 @@ def detect_units(
     )
 
 
+BLOB_SPREAD = 0.3
+"""Distances from a fitted centre that scatter by more than this fraction of their mean lie
+in a blob, not on a sphere: a 3-D Gaussian cloud's scatter by 0.42 of it (a chi with three
+degrees), a sphere of readings' by the calibration's error (under 0.1 for an uncalibrated
+sensor)."""
+
+
 def radius_determined(points: np.ndarray, centre: np.ndarray) -> bool:
     """Whether the points reach beyond a hemisphere about ``centre`` (the smallest cosine of
     their directions to the mean direction is negative), so a sphere through them determines
-    its radius; poses seen from one side leave it to the bias and the gains."""
+    its radius; poses seen from one side leave it to the bias and the gains. Points that
+    surround their centre as a blob does (distances scattered by more than :data:`BLOB_SPREAD`
+    of their mean) determine nothing: a robot driving on one pose, fitted sample by sample,
+    gave a 'sphere' of radius 0.116 about its own readings (norm 9.80 m/s^2), and the refusal
+    said no accelerometer reads 0.116 and proposed the gyroscope."""
     d = np.asarray(points, float) - centre
     n = np.linalg.norm(d, axis=1)
-    if len(d) < 4 or not np.all(n > 0):
+    if len(d) < 4 or not np.all(n > 0) or np.std(n) > BLOB_SPREAD * np.mean(n):
         return False
     return _coverage(np.asarray(points, float), d / n[:, None])[2] < 0
 

@@ -170,6 +170,26 @@ def test_pose_table_in_no_known_unit_says_what_it_found():
         cj.calibrate_accel(table)
 
 
+def test_a_blob_of_readings_is_no_sphere_to_take_a_unit_from():
+    """A ground robot's IMU on one pose (robot_localization's test bag, BSD; a new-user trial),
+    fitted sample by sample: its readings (norm 9.80 m/s^2) surrounded a 'sphere' of radius
+    0.116 fitted through their own scatter, which the unit check took for gravity's size, and
+    the refusal said no accelerometer reads 0.116 and proposed the gyroscope. A blob's
+    distances from its centre scatter by about 0.42 of their mean (a chi with three degrees),
+    a sphere's by the calibration error: a blob determines no radius, and the unit is the
+    norm's (the refusal is then the poses': one side of the sphere)."""
+    from calib_jax.accel import BLOB_SPREAD, radius_determined
+
+    rng = np.random.default_rng(3)
+    blob = np.array([0.0, 9.8, 0.0]) + 0.3 * rng.normal(size=(500, 3))
+    d = np.linalg.norm(blob - blob.mean(axis=0), axis=1)
+    assert np.std(d) / np.mean(d) > BLOB_SPREAD  # (0.42 expected)
+    assert not radius_determined(blob, blob.mean(axis=0))
+    centre = np.array([0.2, -0.1, 0.3])
+    ellipsoid = 9.8 * random_directions(50, 3) * [1.1, 0.9, 1.0] + centre  # +-10 % gains
+    assert radius_determined(ellipsoid, centre)
+
+
 def test_detection_failure_is_not_a_unit_error():
     """Five poses cannot fix nine parameters (and give the sweep nothing to score, so the
     classic 1 s setting is used): the error says what the detector found and tried, never
