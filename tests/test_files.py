@@ -1430,3 +1430,47 @@ def test_ardupilot_text_logs_are_read_by_message(tmp_path):
     with pytest.raises(ValueError, match=r"ArduPilot log whose messages carry no accel.*ATT 200"):
         att = [line for line in lines if line.startswith(("FMT", "ATT"))]
         load_log(_write(tmp_path, "\n".join(att) + "\n", "att.log"))
+
+
+def test_arduino_serial_captures_are_read_by_their_labels(tmp_path):
+    """An Arduino sketch's serial output, as a new user saves it from the Serial Monitor (a
+    new-user trial re-wrote tomisuarez2/ImuCalibration's MPU-6050 log, MIT, this way): the
+    labelled values 'ax: -12 ay: -812 az: 15032' were 12 columns of 'no header', whose
+    --columns advice read labels as numbers ('no finite samples'); the Arduino playground's
+    'AcX = 11219 | AcY = 4382 | ... | Tmp = 36.50 | GyX = ...' was 'no row of 27 plain
+    numbers'; i2cdevlib's MPU6050_raw 'a/g:' before six numbers was 'no header and 7
+    columns'; a German spreadsheet's 'Zeit (s)' was no time column ('give --sample-rate').
+    Now labels name the columns, a label column is left out, 'Fs: 100.00' above the data is
+    the rate, and every value comes back exactly."""
+    rng = np.random.default_rng(11)
+    v = rng.integers(-16000, 16000, size=(300, 6))
+    banner = "Initializing MPU...\nMPU6050 connection successful\nFs: 100.00\n"
+    lines = [f"ax: {a} ay: {b} az: {c}\tgx: {d} gy: {e} gz: {f}" for a, b, c, d, e, f in v]
+    log = load_log(_write(tmp_path, banner + "\n".join(lines) + "\n", "serial.txt"))
+    np.testing.assert_array_equal(log.acc, v[:, :3])
+    np.testing.assert_array_equal(log.gyro, v[:, 3:])
+    assert log.sample_rate == 100.0, log.notes
+    assert any("named by their labels (ax, ay, az, gx, gy, gz)" in n for n in log.notes)
+
+    temp = 36.5 + 0.01 * np.arange(300)
+    short = "".join(
+        f"AcX = {a} | AcY = {b} | AcZ = {c} | Tmp = {float(t)!r} | "
+        f"GyX = {d} | GyY = {e} | GyZ = {f}\n"
+        for (a, b, c, d, e, f), t in zip(v, temp, strict=True)
+    )
+    log = load_log(_write(tmp_path, short, "short.txt"))
+    np.testing.assert_array_equal(log.acc, v[:, :3])
+    np.testing.assert_array_equal(log.gyro, v[:, 3:])
+    np.testing.assert_array_equal(log.temp, temp)
+
+    raw = "".join("a/g:\t" + "\t".join(map(str, row)) + "\n" for row in v)
+    log = load_log(_write(tmp_path, banner + raw, "raw.txt"))
+    np.testing.assert_array_equal(log.acc, v[:, :3])
+    np.testing.assert_array_equal(log.gyro, v[:, 3:])
+    assert any("column 1 holds text in every row (a label), left out" in n for n in log.notes)
+
+    rows = "".join(f"{k / 100:.2f};{a};{b};{c}\n".replace(".", ",") for k, (a, b, c, *_) in
+                   enumerate(v))  # fmt: skip
+    log = load_log(_write(tmp_path, "Zeit (s);ax (g);ay (g);az (g)\n" + rows, "de.csv"))
+    assert log.columns["t"] == "Zeit (s)"
+    np.testing.assert_allclose(log.sample_rate, 100.0, rtol=1e-9)

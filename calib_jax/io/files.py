@@ -32,6 +32,8 @@ Supported:
 * JSON exports, by the same names: a list of records (``[{"t": 0.0, "ax": ...}, ...]``), JSON
   Lines of them, or an object whose (nested) arrays are named like columns or sensors; other
   documents get an error naming their numeric arrays.
+* An Arduino sketch's serial output: lines of labelled values (``ax: -12 ay: -812``, ``AcX = 1
+  | AcY = 2``) by their labels; a label in every row before the numbers (``a/g:``) left out.
 * ArduPilot dataflash logs in text form (``FMT`` lines, then one message a line), by message
   (:mod:`calib_jax.io.dataflash`).
 * HDF5 in the BROAD benchmark's layout (``imu_acc``, ``imu_gyr``, ``imu_mag``, the rate in the
@@ -73,18 +75,20 @@ _ALIASES = {
     "timestamp": "t",
     "times": "t",
     "temp": "temp",
+    "tmp": "temp",
     "temperature": "temp",
     "millis": "t",
     "micros": "t",
 }
 # a time column named with its unit (time_ms, t_us, TimeStamp_ns): the unit itself is read from
 # the median step (_time_in_seconds), the name only says which column is time
-for _base in ("t", "time", "timestamp", "ts", "chiptime"):  # chiptime: YEI 3-Space's clock
+# chiptime: YEI 3-Space's clock; zeit, tiempo, tempo, tijd: a spreadsheet saved in another language
+for _base in ("t", "time", "timestamp", "ts", "chiptime", "zeit", "tiempo", "tempo", "tijd"):
     for _unit in ("", "s", "sec", "ms", "msec", "us", "usec", "ns", "nsec"):
         _ALIASES[_base + _unit] = "t"
 _SENSOR_NAMES = {
-    "a": ("a", "acc", "accel", "accelerometer", "acceleration"),
-    "g": ("g", "gyr", "gyro", "gyroscope", "w"),
+    "a": ("a", "ac", "acc", "accel", "accelerometer", "acceleration"),  # ac: AcX (Arduino)
+    "g": ("g", "gy", "gyr", "gyro", "gyroscope", "w"),
     "m": ("m", "mag", "magn", "magnetometer", "compass"),
 }
 for _k, _names in _SENSOR_NAMES.items():
@@ -780,6 +784,59 @@ def _unbracket(text: str) -> str | None:
     return text.translate({ord("["): None, ord("]"): None})
 
 
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_LABELLED = re.compile(
+    rf"\s*([A-Za-z][\w./]*(?: [A-Za-z][\w./]*)?)\s*[:=]\s*({_NUMBER})\s*(?:[|,;\t]\s*)?"
+)
+
+
+def _labelled_pairs(line: str) -> list[tuple[str, str]] | None:
+    """The (label, number) pairs a whole line is made of ('AcX = 11219 | AcY = 4382', 'ax: -12
+    ay: -812'), else None."""
+    line, pos, out = line.rstrip(), 0, []
+    while pos < len(line):
+        m = _LABELLED.match(line, pos)
+        if m is None or m.end() == pos:
+            return None
+        out.append(m.groups())
+        pos = m.end()
+    return out or None
+
+
+def _labels(text: str) -> tuple[str, ...] | None:
+    """The labels of a log of labelled values, an Arduino sketch's serial output (``AcX =
+    11219 | AcY = 4382 | ...``, ``ax: -12 ay: -812 az: 15032``): those most of its first lines
+    are made of, in their order (three or more); None for any other text."""
+    head = [ln for ln in _split_lines(text[:_HEAD_CHARS])[:200] if ln.strip()]
+    keys = [tuple(k for k, _ in p) for ln in head if (p := _labelled_pairs(ln)) and len(p) >= 3]
+    if len(keys) < 5 or len(keys) < 0.5 * len(head):
+        return None
+    labels, n = Counter(keys).most_common(1)[0]
+    return labels if n >= 0.8 * len(keys) and len(set(labels)) == len(labels) else None
+
+
+def _unlabel(text: str, labels: tuple[str, ...], notes: list[str]) -> str:
+    """The log of labelled values as a table whose header is ``labels``: a line of one pair
+    above the data (``Fs: 100.00``) becomes a preamble entry, lines of other labels among the
+    data are left out, counted in a note."""
+    out, rows, other = [], [], 0
+    for ln in _split_lines(text):
+        p = _labelled_pairs(ln) if ln.strip() else None
+        if p and tuple(k for k, _ in p) == labels:
+            rows.append(",".join(v for _, v in p))
+        elif not rows and p and len(p) == 1:
+            out.append(",".join(p[0]))
+        elif not rows and not p:
+            out.append(ln)  # a banner line: the reader notes it
+        elif ln.strip():
+            other += 1
+    notes.append(
+        f"lines of labelled values read as columns named by their labels ({', '.join(labels)})"
+        + (f"; {other} other line(s) among them left out" if other else "")
+    )
+    return "\n".join([*out, ",".join(labels), *rows]) + "\n"
+
+
 def _tail_codec(enc: str, head: bytes) -> str:
     if enc == "utf-8-sig":
         return "utf-8"
@@ -816,6 +873,10 @@ def _read_text(
             unbracketed = _unbracket(_decode(_read_bytes(path), path, [])[0])
             big, tail_raw = False, None
         text, on_disk = unbracketed, False
+    elif (labels := _labels(text)) is not None:
+        whole = _decode(_read_bytes(path), path, [])[0] if big else text
+        text, on_disk = _unlabel(whole, labels, notes), False
+        big, tail_raw = False, None
     cache = {"text": None if big else text}
 
     def whole_text() -> str:
@@ -1017,7 +1078,7 @@ def _read_text(
         cells = [_strip_cell(c) for c in _cells(ln, delim)]
         cells = [c for c in cells if c] if delim is not None else cells
         if len(cells) == 2 and not _num(cells[0]) and num(cells[1]):
-            preamble[cells[0].lower()] = value(cells[1])
+            preamble[cells[0].lower().rstrip(":= ")] = value(cells[1])  # 'Fs: 100.00'
         elif len(cells) == 2 and (rate := _rate_in_comment(" ".join(cells))) is not None:
             preamble["sample rate"] = rate  # 'OutputRate:,60Hz' (Xsens DOT)
         else:
@@ -1392,6 +1453,56 @@ def _gyro_before_accel(cols: list[str], why: str, data: np.ndarray | None) -> tu
     )
 
 
+def _headerless_guess(
+    path: Path, width: int, data: np.ndarray, sensor: str | None
+) -> tuple[list[str], str]:
+    """The columns of a headerless file of ``width`` columns, by their count, their values and
+    the file's name (``sensor``: the command's), and the reason the note gives."""
+    by_name = ""
+    if width in (3, 4):  # one sensor's x, y, z (and a time): which, the name may say
+        which, by_name = _sensor_of_bare_columns(
+            path, sensor, f"headerless {width} columns", timed=width == 4
+        )
+        sensor = which
+    guess = _guess(width, sensor)
+    if width in (6, 7) and _last_three_held(data):
+        # Android's uncalibrated events: x, y, z and the OS's bias estimate, constant for
+        # the whole log (a phone's gyroscope.txt, t x y z bx by bz); read as a second
+        # sensor they gave a gyro 'calibration' of constants and exit 0
+        which, named = _sensor_of_bare_columns(
+            path, sensor, f"headerless {width} columns (x, y, z and three constants)"
+        )
+        p = _SENSORS[which]
+        held = "three constant columns (an Android uncalibrated event's bias estimate)"
+        guess = (
+            [*(["t"] if width == 7 else []), p + "x", p + "y", p + "z", "_", "_", "_"],
+            (named or f"sensor {_SENSOR_LABELS[p]}") + f", then {held}, left out",
+        )
+    if guess is None:
+        guess = _clocks_at_an_end(width, data, sensor)
+    if guess is None:
+        if width < 3:
+            raise ValueError(
+                f"{path} has no header and only {width} column(s) per row; a sensor log "
+                "needs x, y and z (at least 3)"
+            )
+        raise ValueError(
+            f"{path} has no header and {width} columns ({_describe_columns(data)}); say "
+            f"what they are with --columns, e.g. --columns {_example(width, data, sensor)} "
+            "('_' skips a column; t for a time column, else give --sample-rate)"
+        )
+    cols, why = _time_last(guess[0], by_name or guess[1], data, path)
+    return _gyro_before_accel(cols, why, data)
+
+
+def _label_columns(data: np.ndarray) -> list[int]:
+    """Columns that hold no number in any row: a label an Arduino sketch prints before its
+    values on every line (i2cdevlib's MPU6050_raw: 'a/g:' then six numbers)."""
+    if not len(data):
+        return []
+    return [j for j in range(data.shape[1]) if np.isnan(data[:, j]).all()]
+
+
 def _guess(width: int, sensor: str | None) -> tuple[list[str], str] | None:
     """Headerless columns by width: the names and the reason given in the note."""
     p = _SENSORS[sensor]
@@ -1749,41 +1860,17 @@ def _assemble(
                 "--columns to override"
             )
     elif mapping is None:
-        by_name = ""
-        if width in (3, 4):  # one sensor's x, y, z (and a time): which, the name may say
-            which, by_name = _sensor_of_bare_columns(
-                path, sensor, f"headerless {width} columns", timed=width == 4
-            )
-            sensor = which
-        guess = _guess(width, sensor)
-        if width in (6, 7) and _last_three_held(data):
-            # Android's uncalibrated events: x, y, z and the OS's bias estimate, constant for
-            # the whole log (a phone's gyroscope.txt, t x y z bx by bz); read as a second
-            # sensor they gave a gyro 'calibration' of constants and exit 0
-            which, named = _sensor_of_bare_columns(
-                path, sensor, f"headerless {width} columns (x, y, z and three constants)"
-            )
-            p = _SENSORS[which]
-            held = "three constant columns (an Android uncalibrated event's bias estimate)"
-            guess = (
-                [*(["t"] if width == 7 else []), p + "x", p + "y", p + "z", "_", "_", "_"],
-                (named or f"sensor {_SENSOR_LABELS[p]}") + f", then {held}, left out",
-            )
-        if guess is None:
-            guess = _clocks_at_an_end(width, data, sensor)
-        if guess is None:
-            if width < 3:
-                raise ValueError(
-                    f"{path} has no header and only {width} column(s) per row; a sensor log "
-                    "needs x, y and z (at least 3)"
-                )
-            raise ValueError(
-                f"{path} has no header and {width} columns ({_describe_columns(data)}); say "
-                f"what they are with --columns, e.g. --columns {_example(width, data, sensor)} "
-                "('_' skips a column; t for a time column, else give --sample-rate)"
-            )
-        cols, why = _time_last(guess[0], by_name or guess[1], data, path)
-        cols, why = _gyro_before_accel(cols, why, data)
+        labels = _label_columns(data)
+        keep = [j for j in range(width) if j not in labels]
+        if labels and len(keep) >= 3:
+            sub, why_sub = _headerless_guess(path, len(keep), data[:, keep], sensor)
+            cols = ["_"] * width
+            for j, c in zip(keep, sub, strict=True):
+                cols[j] = c
+            where = ", ".join(str(j + 1) for j in labels)
+            why = f"{why_sub}; column {where} holds text in every row (a label), left out"
+        else:
+            cols, why = _headerless_guess(path, width, data, sensor)
         source = {c: i for i, c in enumerate(cols) if c != "_"}
         notes.append(
             f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
