@@ -884,8 +884,8 @@ def test_time_in_ms_us_ns_is_converted_to_seconds(tmp_path, scale, unit, rate):
     log = load_log(path)
     assert log.sample_rate == pytest.approx(rate, rel=1e-3)
     assert np.median(np.diff(log.t)) == pytest.approx(1 / rate, rel=1e-3)
-    noted = [s for s in log.notes if "time column read as" in s]
-    assert (noted[0].split()[4] == unit) if unit else not noted, log.notes
+    noted = [s for s in log.notes if s.startswith("time column")]
+    assert (f"time column 't' read as {unit} " in noted[0]) if unit else not noted, log.notes
 
 
 def test_vendor_prefixed_names_are_recognised(tmp_path):

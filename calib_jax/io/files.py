@@ -1955,6 +1955,8 @@ def _assemble(
     time_scale = 1.0
     if t is not None:
         t, unit_note, time_scale = _time_in_seconds(t)
+        if unit_note and header is not None:  # which column, where several look like one
+            unit_note = unit_note.replace("time column", f"time column {header[source['t']]!r}", 1)
         if unit_note:
             notes.append(unit_note)
     if sample_rate is not None and t is not None and (mapping is None or "t" not in mapping):
