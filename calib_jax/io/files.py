@@ -1408,16 +1408,26 @@ def _clocks_at_an_end(
     )
 
 
+HELD_CHANGES = 0.02
+"""Columns that change on at most this fraction of rows are held values, an estimate updated
+now and then, not readings."""
+
+
 def _last_three_held(data: np.ndarray | None) -> bool:
-    """The last three columns hold one value each for the whole file while the three before
-    them move: a sensor's readings followed by a constant estimate of its bias."""
+    """The last three columns hold their values, changing on at most :data:`HELD_CHANGES` of
+    the rows, while the three before them move on most rows: a sensor's readings followed by
+    the operating system's estimate of their bias (Android's uncalibrated events). A phone's
+    magnetometer whose estimate Android updated 15 times during a tumble was read as an
+    accelerometer then a magnetometer, and its bias columns calibrated, exit 0."""
     if data is None or len(data) < 10:
         return False
     last, before = data[:, -3:], data[:, -6:-3]
     ok = np.all(np.isfinite(last), axis=1) & np.all(np.isfinite(before), axis=1)
     if ok.sum() < 10:
         return False
-    return bool(np.all(np.ptp(last[ok], axis=0) == 0) and np.all(np.ptp(before[ok], axis=0) > 0))
+    changes = np.any(np.diff(last[ok], axis=0) != 0, axis=1).mean()
+    moves = np.any(np.diff(before[ok], axis=0) != 0, axis=1).mean()
+    return bool(changes <= HELD_CHANGES and moves > 0.5)
 
 
 def _steady_magnitude(v: np.ndarray) -> float | None:
@@ -1473,7 +1483,7 @@ def _headerless_guess(
             path, sensor, f"headerless {width} columns (x, y, z and three constants)"
         )
         p = _SENSORS[which]
-        held = "three constant columns (an Android uncalibrated event's bias estimate)"
+        held = "three held columns (an Android uncalibrated event's bias estimate)"
         guess = (
             [*(["t"] if width == 7 else []), p + "x", p + "y", p + "z", "_", "_", "_"],
             (named or f"sensor {_SENSOR_LABELS[p]}") + f", then {held}, left out",
