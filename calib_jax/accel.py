@@ -95,6 +95,17 @@ logs here: 1e-4 to 3e-3); more, and the quiet stretches the detector found are p
 hand-held motion, not rests (a micropython-fusion MPU-9150 log: 0.012). ``calib-jax marg``
 then fits the accelerometer's ellipsoid instead; the accelerometer and gyro fits warn."""
 
+REST_FAIL = 3e-2
+"""Poses that leave this much of g after the fit (three times :data:`REST_RMS_LIMIT`) are no
+rests at all, and the fit to them is no calibration: a phone's hand-held magnetometer tumble
+(tyrex-team's Nexus 5) gave 12 'poses' that left 0.074 of g, 1x lower than before, exit 0 as
+usable, and on the same phone's held poses that calibration left 5.7 % of g where the raw
+readings left 1.5 %."""
+
+REFUSALS = ("the fitted gains are", "the poses do not determine", "the poses are no rests")
+"""How the warnings that make a fit that ran 'failed' begin (:func:`implausible_gains`,
+:func:`undetermined`, :func:`not_rests`): the gyro gives them as its reason to refuse."""
+
 
 # ---------------------------------------------------------------------------------------------
 # pure core
@@ -653,7 +664,10 @@ def calibrate_accel(
     offset, scale = _nominal(x_static, units, g)
     before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
     after, floor = interval_errors(params, g, x, report)
-    if after >= REST_RMS_LIMIT:
+    if status != "failed" and (no_rests := not_rests(after, len(means))):
+        status, refusal = "failed", no_rests
+        warn.append(refusal)
+    elif after >= REST_RMS_LIMIT:
         warn.append(
             f"the {len(means)} poses leave {after:.2g} of g after the fit (held rests leave "
             f"under {REST_RMS_LIMIT:g}): they look like pauses in a motion, not rests; hold "
@@ -707,6 +721,19 @@ def calibrate_accel(
             stacklevel=2,
         )
     return cal
+
+
+def not_rests(after: float, n_poses: int) -> str | None:
+    """Why poses that leave ``after`` of g after the fit are no calibration (at least
+    :data:`REST_FAIL`), else None: the one rule of the single fit and the batch."""
+    if not after >= REST_FAIL:
+        return None
+    return (
+        f"the poses are no rests: the {n_poses} of them leave {after:.2g} of g after the fit, "
+        f"{after / REST_RMS_LIMIT:.0f} times what held rests leave ({REST_RMS_LIMIT:g}), so the "
+        "quiet stretches the detector found are pauses in a motion (a tumble?) and a fit to "
+        "them is no calibration; hold each pose still for a few seconds on a support"
+    )
 
 
 def _resolve_units(

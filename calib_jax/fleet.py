@@ -206,10 +206,16 @@ def _judge_accel(entry: dict, info: dict, model: str) -> None:
     """The single fit's status rule on a batch entry: a fit whose standard errors exceed 1 %
     of g is poorly determined, with the coverage warnings that say why (the batch called a
     one-hemisphere log with a z gain of 1.51 'ok' where calib-jax accel said so), and its rule
-    that gains no accelerometer has, or parameters the poses do not determine at all, are no
-    calibration (:func:`calib_jax.accel.implausible_gains`, :func:`calib_jax.accel.
-    undetermined`)."""
-    from .accel import POORLY_DETERMINED, implausible_gains, poorly_determined, undetermined
+    that gains no accelerometer has, poses that are no rests, or parameters the poses do not
+    determine at all, are no calibration (:func:`calib_jax.accel.implausible_gains`,
+    :func:`calib_jax.accel.not_rests`, :func:`calib_jax.accel.undetermined`)."""
+    from .accel import (
+        POORLY_DETERMINED,
+        implausible_gains,
+        not_rests,
+        poorly_determined,
+        undetermined,
+    )
 
     # parameters and standard errors in units of g: gains and cross terms over r / g,
     # biases over r
@@ -225,6 +231,11 @@ def _judge_accel(entry: dict, info: dict, model: str) -> None:
         if implausible:
             entry["status"] = "failed"
             entry["message"] = implausible
+            return
+        no_rests = not_rests(entry.get("rms", np.nan), info["static_intervals"])
+        if no_rests:
+            entry["status"] = "failed"
+            entry["message"] = no_rests
             return
     if entry["status"] != "ok":
         return

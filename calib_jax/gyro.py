@@ -950,7 +950,7 @@ class _PoseLog:
 def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _PoseLog:
     """Check the log, calibrate its accelerometer if not given, find the rests and the usable
     motions between them; a ValueError saying what to change where that fails."""
-    from .accel import REST_RMS_LIMIT, calibrate_accel
+    from .accel import REFUSALS, REST_RMS_LIMIT, calibrate_accel
 
     notes: list[str] = []
     warn: list[str] = []
@@ -1048,13 +1048,9 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         )
     if not accel.success:
         why = [w for w in accel.warnings if w.startswith(("all poses lie", "gravity hardly"))]
-        refusals = [
-            w
-            for w in accel.warnings
-            if w.startswith(("the fitted gains are", "the poses do not determine"))
-        ]
-        # gains no accelerometer has, or none determined: the solver's "raise the budget"
-        # would contradict them
+        refusals = [w for w in accel.warnings if w.startswith(REFUSALS)]
+        # gains no accelerometer has, none determined, or poses that are no rests: the
+        # solver's "raise the budget" would contradict them
         raise ValueError(
             "the accelerometer calibration "
             + ("failed" if accel.status == "failed" else "did not converge")

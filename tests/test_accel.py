@@ -427,3 +427,36 @@ def test_auto_fits_six_parameters_where_the_poses_never_mix_x_and_y():
     [why] = [w for w in auto.warnings if w.startswith("the poses do not determine")]
     assert "S_xy" in why and "alpha_z" not in why and "beta" not in why, why
     assert "tilted between the x and y axes" in why and "--model accel6" in why, why
+
+
+def test_quiet_stretches_of_a_tumble_are_no_calibration(tmp_path):
+    """A phone's hand-held magnetometer tumble fitted as an accelerometer (tyrex-team's Nexus 5,
+    a new-user trial): its slow parts were taken for 31 poses that left 0.074 of g after the
+    fit, 1x lower than before, and the fit was 'poorly_determined', exit 0; on the same phone's
+    held poses that calibration left 5.7 % of g where the raw readings left 1.5 %. Simulated
+    here: a smooth tumble at 50 Hz with the hand's acceleration (0.8 m/s^2, correlated over
+    20 samples). Poses that leave over accel.REST_FAIL (three times what held rests ever
+    leave) are now no calibration, and say so in words the gyro gives as its reason."""
+    import jax
+
+    from calib_jax.accel import REFUSALS, REST_FAIL
+    from calib_jax.rotations import quat_to_dcm
+    from calib_jax.simulate import correlated_noise, tumble_quaternions
+
+    C = np.asarray(jax.vmap(quat_to_dcm)(tumble_quaternions(6000, rng=0, knots=12)))
+    gravity = np.einsum("nji,j->ni", C, [0.0, 0.0, 9.81])  # in the sensor frame
+    rng = np.random.default_rng(0)
+    acc = gravity + correlated_noise(6000, 0.8, 0.95, rng=0) + 0.02 * rng.normal(size=(6000, 3))
+    with pytest.warns(FitStatusWarning, match="the poses are no rests"):
+        cal = cj.calibrate_accel(acc, sample_rate=50.0)
+    assert cal.status == "failed" and not cal.success
+    assert cal.rms_after > REST_FAIL and cal.rms_after > 0.9 * cal.rms_before  # no better
+    assert any(w.startswith(REFUSALS) for w in cal.warnings), cal.warnings
+    # the batch's entry, by the same rule (fleet._judge_accel)
+    from calib_jax.fleet import calibrate_files
+
+    path = tmp_path / "tumble.csv"
+    np.savetxt(path, np.column_stack([np.arange(6000) / 50.0, acc]), delimiter=",",
+               header="t,ax,ay,az", comments="")  # fmt: skip
+    (entry,) = calibrate_files([str(path)], progress=False)
+    assert entry["status"] == "failed" and "the poses are no rests" in entry["message"], entry
