@@ -29,11 +29,14 @@ LOG_SUFFIXES = tuple(base + z for base in (".csv", ".tsv") for z in ("", ".gz", 
 holds READMEs and licences as often as logs)."""
 _LOG_NAMES = ".csv, .tsv (also gzip, bzip2 or xz compressed) or .mat"
 _DOC_SUFFIXES = frozenset(
-    ".md .rst .txt .pdf .png .jpg .jpeg .gif .svg .html .py .ipynb .json .yaml .yml .toml".split()
+    (
+        ".md .rst .pdf .png .jpg .jpeg .gif .svg .html .py .ipynb .json .yaml .yml .toml "
+        ".properties .ini .cfg .conf .xml"
+    ).split()
 )
-"""Suffixes of what sits beside logs (a NOTES.md, a plot, a calibration written earlier):
-never the ones ``batch`` proposes to read, nor counted as logs it left out. .txt counts as a
-log only when the folder holds nothing else."""
+"""Suffixes of what sits beside logs (a NOTES.md, a plot, a calibration written earlier, a
+recorder's settings: tyrex-team's record.properties): never the ones ``batch`` proposes to
+read, nor counted as logs it left out."""
 
 # ---------------------------------------------------------------------------------------------
 # option types: a bad value is a usage error (exit 2) naming the option and the value
@@ -389,7 +392,6 @@ def run_batch(args: argparse.Namespace) -> int:
             )
         found = ", ".join(f"{n} {sfx}" for sfx, n in suffixes.most_common(4))
         data = [(n, sfx) for sfx, n in suffixes.most_common() if sfx not in _DOC_SUFFIXES]
-        data = data or [(n, sfx) for sfx, n in suffixes.most_common() if sfx == ".txt"]
         if not data:
             raise ValueError(
                 f"no files matching {wanted} under {root}; it holds {len(every)} file(s) "

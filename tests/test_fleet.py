@@ -327,6 +327,15 @@ def test_batch_cli_bad_directory(tmp_path, capsys):
     assert main(["batch", str(other)]) == 2
     err = capsys.readouterr().err
     assert "(1 .log, 1 .md): --pattern '*.log' takes the .log ones" in err
+    # a phone recorder's folder: 14 .txt, its settings in 2 .properties (tyrex-team's), notes
+    for k in range(3):
+        (other / f"sensor{k}.txt").write_text("1 2 3 4\n")
+    for k in range(4):
+        (other / f"record{k}.properties").write_text("device=Nexus 5\n")
+    assert main(["batch", str(other)]) == 2
+    assert "--pattern '*.txt' takes the .txt ones" in capsys.readouterr().err
+    for f in (*other.glob("*.txt"), *other.glob("*.properties")):
+        f.unlink()
     (other / "00000012.log").unlink()
     assert main(["batch", str(other)]) == 2
     assert "none of them a log by its name; name the logs with --pattern" in capsys.readouterr().err
