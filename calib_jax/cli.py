@@ -175,7 +175,10 @@ def _binary_kind(p: Path) -> str | None:
 
 def _unreadable(path: str, why: str) -> ValueError:
     kind = _binary_kind(Path(path))
-    if kind is not None:  # the loader's reason quotes binary junk: the kind says more
+    named = "is not a text log (" in why and not any(
+        w in why for w in ("NUL bytes", "undecodable characters")
+    )  # the loader named the format (a PX4 ULog, an ArduPilot .bin) and how to convert it
+    if kind is not None and not named:  # the loader's reason quotes binary junk: say the kind
         return ValueError(
             f"{path} is {kind}, not a text log (CSV, TSV, whitespace-separated) or a MATLAB "
             ".mat file; export the sensor columns to CSV"

@@ -1481,3 +1481,21 @@ def test_arduino_serial_captures_are_read_by_their_labels(tmp_path):
     log = load_log(_write(tmp_path, "Zeit (s);ax (g);ay (g);az (g)\n" + rows, "de.csv"))
     assert log.columns["t"] == "Zeit (s)"
     np.testing.assert_allclose(log.sample_rate, 100.0, rtol=1e-9)
+
+
+def test_flight_logs_in_binary_say_how_to_convert_them(tmp_path, capsys):
+    """A PX4 ULog (pyulog's sample.ulg, BSD-3, a new-user trial) was 'a binary file ... export
+    the sensor columns to CSV', by every command, with no word of ULog or ulog2csv, though the
+    loader reads ulog2csv's columns; an ArduPilot .bin the same. Each names its format and
+    the converter whose output calib-jax reads, in load_log and through the CLI."""
+    from calib_jax.cli import main
+
+    ulog = _write(tmp_path, b"ULog\x01\x12\x35\x00" + bytes(range(256)) * 8, "flight.ulg")
+    with pytest.raises(ValueError, match=r"a PX4 ULog\); pyulog's ulog2csv .*sensor_combined"):
+        load_log(ulog)
+    dataflash = _write(tmp_path, b"\xa3\x95\x80\x80\x59FMT\x00" + bytes(range(256)) * 8, "0.bin")
+    with pytest.raises(ValueError, match=r"ArduPilot dataflash \.bin\); .*mavlogdump"):
+        load_log(dataflash)
+    assert main(["mag", str(ulog)]) == 2
+    err = capsys.readouterr().err
+    assert "ulog2csv" in err and "Traceback" not in err

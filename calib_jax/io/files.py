@@ -434,11 +434,9 @@ def _decompress(raw: bytes, path: Path, notes: list[str]) -> tuple[bytes, bool]:
     return raw, False
 
 
-def _binary(path: Path, what: str) -> ValueError:
-    return ValueError(
-        f"{path} is not a text log ({what}); export it as CSV or text with one row per sample "
-        "(or a MATLAB .mat file)"
-    )
+def _binary(path: Path, what: str, how: str | None = None) -> ValueError:
+    how = how or "export it as CSV or text with one row per sample (or a MATLAB .mat file)"
+    return ValueError(f"{path} is not a text log ({what}); {how}")
 
 
 def _decode(raw: bytes, path: Path, notes: list[str], partial: bool = False) -> tuple[str, str]:
@@ -450,6 +448,22 @@ def _decode(raw: bytes, path: Path, notes: list[str], partial: bool = False) -> 
         raise _binary(path, "an HDF5 file; read it with h5py")
     if raw.startswith(b"PK\x03\x04"):
         raise _binary(path, "a zip archive, or an Excel/ODF workbook; unzip it or save as CSV")
+    if raw.startswith(b"ULog\x01\x12\x35"):
+        raise _binary(
+            path,
+            "a PX4 ULog",
+            "pyulog's ulog2csv writes its topics as CSV files that calib-jax reads: pip install "
+            "pyulog; ulog2csv FILE; the accelerometer and gyroscope are then in "
+            "*_sensor_combined_0.csv, the magnetometer in *_sensor_mag_0.csv",
+        )
+    if raw.startswith(b"\xa3\x95\x80"):  # a dataflash header, then the FMT message (128)
+        raise _binary(
+            path,
+            "an ArduPilot dataflash .bin",
+            "write its IMU and MAG messages as CSV with pymavlink (mavlogdump.py --format csv "
+            "--types IMU FILE > imu.csv, and --types MAG), or save it as a text .log with "
+            "Mission Planner, which calib-jax reads as it is",
+        )
     boms = (
         (codecs.BOM_UTF32_LE, "utf-32", "UTF-32"),
         (codecs.BOM_UTF32_BE, "utf-32", "UTF-32"),
