@@ -1494,7 +1494,10 @@ def _headerless_guess(
         # the whole log (a phone's gyroscope.txt, t x y z bx by bz); read as a second
         # sensor they gave a gyro 'calibration' of constants and exit 0
         which, named = _sensor_of_bare_columns(
-            path, sensor, f"headerless {width} columns (x, y, z and three constants)"
+            path,
+            sensor,
+            f"headerless {width} columns (x, y, z and three held values)",
+            timed=width == 7,
         )
         p = _SENSORS[which]
         held = "three held columns (an Android uncalibrated event's bias estimate)"
