@@ -1501,3 +1501,18 @@ def test_flight_logs_in_binary_say_how_to_convert_them(tmp_path, capsys):
     assert main(["mag", str(ulog)]) == 2
     err = capsys.readouterr().err
     assert "ulog2csv" in err and "Traceback" not in err
+
+
+def test_a_headerless_file_of_no_known_width_is_mapped_by_its_name(tmp_path):
+    """iOS's magnetometer-calibrated.txt (tyrex-team, CeCILL-2.1, a new-user trial): five
+    headerless columns, t x y z and an accuracy flag, whose refusal offered --columns
+    t,ax,ay,az,_ (the magnetometer read as an accelerometer). The example now maps the sensor
+    the file's name names, and a command for another sensor is told which one it holds."""
+    rng = np.random.default_rng(2)
+    rows = np.column_stack([136800 + 0.02 * np.arange(200), rng.normal(size=(200, 3)),
+                            np.zeros(200)])  # fmt: skip
+    np.savetxt(tmp_path / "magnetometer-calibrated.txt", rows)
+    with pytest.raises(ValueError, match=r"--columns t,mx,my,mz,_ "):
+        load_log(tmp_path / "magnetometer-calibrated.txt")
+    with pytest.raises(ValueError, match="names the magnetometer, not the accelerometer"):
+        load_log(tmp_path / "magnetometer-calibrated.txt", sensor="accel")

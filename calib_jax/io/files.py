@@ -1513,9 +1513,13 @@ def _headerless_guess(
                 f"{path} has no header and only {width} column(s) per row; a sensor log "
                 "needs x, y and z (at least 3)"
             )
+        # the example maps the sensor the file's name names (magnetometer-calibrated.txt's
+        # five columns were offered as t,ax,ay,az,_); another command's sensor is refused
+        timed = bool(len(data)) and _rising(data[:, 0])
+        which, _ = _sensor_of_bare_columns(path, sensor, f"headerless {width} columns", timed=timed)
         raise ValueError(
             f"{path} has no header and {width} columns ({_describe_columns(data)}); say "
-            f"what they are with --columns, e.g. --columns {_example(width, data, sensor)} "
+            f"what they are with --columns, e.g. --columns {_example(width, data, which)} "
             "('_' skips a column; t for a time column, else give --sample-rate)"
         )
     cols, why = _time_last(guess[0], by_name or guess[1], data, path)
