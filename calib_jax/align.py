@@ -260,6 +260,13 @@ def block_jackknife_cov(estimates: np.ndarray) -> np.ndarray:
     return (k - 1) / k * d.T @ d
 
 
+NEGATIVE_DIP_DEG = 10.0
+"""A dip below minus this says the field points up: south of the magnetic equator, or an
+accelerometer that reads gravity instead of the specific force (an iPhone 5's CoreMotion
+readings gave -52 deg where an Android phone in the same city gave +60; a new-user trial on
+tyrex-team's calibration recordings)."""
+
+
 def time_blocks(n: int, k: int = JACKKNIFE_BLOCKS) -> np.ndarray:
     """Block index 0..k-1 of each of n samples in time order (contiguous, equal sizes)."""
     return np.arange(n) * k // max(n, 1)
@@ -513,12 +520,22 @@ def align_mag_to_accel(
         warn.append(
             "the rotation is poorly determined (std. error above 1 degree); cover more orientations"
         )
+    dip = float(theta - 90.0)
+    if dip < -NEGATIVE_DIP_DEG:
+        warn.append(
+            f"the dip is {dip:.1f} deg: the field points up from the horizontal, as it does only "
+            "south of the magnetic equator; north of it, the accelerometer reads gravity rather "
+            "than the specific force (a board lying flat should read +1 g on z; iOS's "
+            "CoreMotion accelerometer reads -1 g): negate its readings; or the magnetometer's "
+            "axes mirror the accelerometer's (a left-handed mount), which "
+            "align_mag_to_accel(hemisphere='north') resolves"
+        )
     return MagAccelAlignment(
         R_acc_from_mag=R,
         permutation=P,
         permutation_text=describe_permutation(P),
         rotation_deg=rotation_angle_deg(R @ P.T),
-        dip_deg=float(theta - 90.0),
+        dip_deg=dip,
         dip_stderr_deg=dip_se,
         spread_before_deg=float(np.std(before)),
         spread_after_deg=float(np.std(after)),
