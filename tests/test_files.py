@@ -925,10 +925,15 @@ def test_every_fit_takes_a_file_path(tmp_path):
 
 def test_rows_in_brackets_say_what_was_found(tmp_path):
     """uBot's LSM303 logs print a Python tuple per sample: the error quoted nothing and said
-    'no row of 6 numbers found' of rows that hold six numbers in brackets."""
+    'no row of 6 numbers found' of rows that hold six numbers in brackets; then it quoted the
+    first line. Lines that are all tuples are now read as rows of their numbers; a line with
+    other text around its brackets is still refused, quoting it."""
     rows = "".join(f"(({i}.5, -0.05, 10.5), (-38.7, -60.9, 0.9))\n" for i in range(30))
-    with pytest.raises(ValueError, match=r"first line: '\(\(0\.5, -0\.05.*brackets"):
-        load_log(_write(tmp_path, rows, "tuples.txt"))
+    log = load_log(_write(tmp_path, rows, "tuples.txt"))
+    np.testing.assert_array_equal(log.acc[:, 0], np.arange(30) + 0.5)
+    labelled = "".join(f"sample (({i}.5, -0.05, 10.5), (-38.7, -60.9, 0.9))\n" for i in range(30))
+    with pytest.raises(ValueError, match=r"first line: 'sample \(\(0\.5, -0\.05.*brackets"):
+        load_log(_write(tmp_path, labelled, "labelled.txt"))
 
 
 def test_json_list_lines_read_with_the_time_column_where_it_rises(tmp_path):
@@ -948,7 +953,7 @@ def test_json_list_lines_read_with_the_time_column_where_it_rises(tmp_path):
     np.testing.assert_allclose(log.acc[:, 2], -0.98)
     np.testing.assert_allclose(log.mag[0], [12.0, -3.5, 40.2])
     np.testing.assert_allclose(np.diff(log.t), 0.02)  # microseconds to seconds
-    assert any("JSON lists" in n for n in log.notes)
+    assert any("bracketed lists" in n for n in log.notes)
     assert any("time last" in n for n in log.notes)
     assert any("1 rows had the wrong number of fields" in n for n in log.notes)
 
@@ -1516,3 +1521,37 @@ def test_a_headerless_file_of_no_known_width_is_mapped_by_its_name(tmp_path):
         load_log(tmp_path / "magnetometer-calibrated.txt")
     with pytest.raises(ValueError, match="names the magnetometer, not the accelerometer"):
         load_log(tmp_path / "magnetometer-calibrated.txt", sensor="accel")
+
+
+def test_clock_times_device_numbers_and_python_tuples_are_read(tmp_path):
+    """Three layouts of a third new-user trial: WitMotion's dual logger (e-ke/get_bwt901cl_data,
+    MIT) writes 'Time, AccX1, ..., AccX2, ..., AngVelX1, ...' with times of day
+    ('10:41:11.376'), which were NaN (the gyro then had no clock and no way out), and its
+    columns were 'no sensor columns'; a MicroPython driver's printed tuples '((ax, ay, az),
+    (mx, my, mz))' (hu-zza/uBot_firmware, MIT) were 'no row of 6 plain numbers', though the
+    same shape in JSON lists was read. Now times of day are seconds (a day added past
+    midnight), a device number after the axis is read with the two-sensors note, and tuples
+    are rows of their numbers."""
+    rng = np.random.default_rng(4)
+    acc, acc2, gyr = (rng.normal(size=(100, 3)) for _ in range(3))
+    t = 86390.0 + 0.1 * np.arange(100)  # through midnight
+    clock = [f"{int(s // 3600) % 24:02d}:{int(s % 3600 // 60):02d}:{s % 60:06.3f}" for s in t]
+    rows = "".join(
+        f"{c}, {', '.join(repr(float(v)) for v in [*a, *b, *w])}\n"
+        for c, a, b, w in zip(clock, acc, acc2, gyr, strict=True)
+    )
+    header = "Time, AccX1, AccY1, AccZ1, AccX2, AccY2, AccZ2, AngVelX1, AngVelY1, AngVelZ1\n"
+    log = load_log(_write(tmp_path, header + rows, "sensor_data.csv"))
+    np.testing.assert_allclose(log.t - log.t[0], t - t[0], atol=1e-6)
+    np.testing.assert_allclose(log.sample_rate, 10.0, rtol=1e-6)
+    np.testing.assert_array_equal(log.acc, acc)
+    np.testing.assert_array_equal(log.gyro, gyr)
+    assert any("twice: two sensors in one file?" in n for n in log.notes), log.notes
+
+    tuples = "".join(
+        "(({!r}, {!r}, {!r}), ({!r}, {!r}, {!r}))\n".format(*(float(v) for v in [*a, *m]))
+        for a, m in zip(acc, 40 * acc2, strict=True)
+    )
+    log = load_log(_write(tmp_path, tuples, "LSM303_log"), sensor="mag")
+    np.testing.assert_array_equal(log.acc, acc)
+    np.testing.assert_array_equal(log.mag, 40 * acc2)

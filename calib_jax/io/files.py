@@ -88,7 +88,7 @@ for _base in ("t", "time", "timestamp", "ts", "chiptime", "zeit", "tiempo", "tem
         _ALIASES[_base + _unit] = "t"
 _SENSOR_NAMES = {
     "a": ("a", "ac", "acc", "accel", "accelerometer", "acceleration"),  # ac: AcX (Arduino)
-    "g": ("g", "gy", "gyr", "gyro", "gyroscope", "w"),
+    "g": ("g", "gy", "gyr", "gyro", "gyroscope", "w", "angvel", "angularvelocity"),
     "m": ("m", "mag", "magn", "magnetometer", "compass"),
 }
 for _k, _names in _SENSOR_NAMES.items():
@@ -183,7 +183,12 @@ def canonical_name(name: str) -> str | None:
     A name in the alias table (``AccX``, ``gyro_z``, ``time_ms``) first; else a name read word
     by word (:func:`_name_by_words`): ROS ``field.linear_acceleration.x``, PX4
     ``accelerometer_m_s2[0]``, phyphox ``X (m/s^2)``."""
-    return _ALIASES.get(_clean(name)) or _name_by_words(name)
+    clean = _clean(name)
+    if clean not in _ALIASES and (m := re.fullmatch(r"(.+[xyz])[0-9]", clean)):
+        # the device's number after the axis (WitMotion's dual logger: AccX1, AccX2), the
+        # second device then named twice (_named_twice says how to read it)
+        return _ALIASES.get(m[1]) or _name_by_words(name)
+    return _ALIASES.get(clean) or _name_by_words(name)
 
 
 # words that name a sensor in a longer column name, the unit in brackets that does, and the
@@ -742,10 +747,31 @@ def _parse_rows(
     return out, bad
 
 
+_CLOCK = re.compile(r"(\d{1,2}):(\d{2}):(\d{2}(?:\.\d*)?)")
+
+
+def _clock_times(cells: list[str]) -> np.ndarray | None:
+    """Times of day ('10:41:11.376', '16:21:10': a WitMotion logger's, a Sense HAT's) as
+    seconds, a day added at each midnight; None when a cell is something else."""
+    found = [_CLOCK.fullmatch(c) if c else None for c in cells]
+    if not any(found) or any(c and m is None for c, m in zip(cells, found, strict=True)):
+        return None
+    out = np.array(
+        [int(m[1]) * 3600 + int(m[2]) * 60 + float(m[3]) if m else np.nan for m in found]
+    )
+    ok = np.isfinite(out)
+    back = np.zeros(len(out))
+    back[np.flatnonzero(ok)[1:]] = np.diff(out[ok]) < -43200  # past midnight
+    return out + 86400.0 * np.cumsum(back)
+
+
 def _datetimes(cells: list[str]) -> np.ndarray | None:
-    """ISO 8601 dates and times ('2021-04-05 15:48:04.834') as Unix seconds (NaN for an
-    empty cell), or None when a cell is something else."""
+    """ISO 8601 dates and times ('2021-04-05 15:48:04.834') as Unix seconds, or times of day
+    as seconds (:func:`_clock_times`); NaN for an empty cell, None when a cell is something
+    else."""
     cells = [_strip_cell(c) for c in cells]
+    if any(cells) and (clock := _clock_times(cells)) is not None:
+        return clock
     if not any(cells) or not all(len(c) >= 10 and c[4] == "-" for c in cells if c):
         return None
     try:
@@ -788,14 +814,17 @@ def _refuse_epoch_counts(path, preamble: list[str]) -> None:
 
 
 def _unbracket(text: str) -> str | None:
-    """Lines that are JSON lists of numbers (``[[ax, ay, az], [gx, gy, gz], t]``, as
-    micropython-fusion logs): the text without the brackets, so each line reads as a row of
-    its numbers; None when most lines are something else."""
+    """Lines that are JSON lists or Python tuples of numbers (``[[ax, ay, az], [gx, gy, gz],
+    t]``, as micropython-fusion logs; ``((ax, ay, az), (mx, my, mz))``, a MicroPython print of
+    a driver's readings): the text without the brackets, so each line reads as a row of its
+    numbers; None when most lines are something else."""
     lines = [s for ln in text[:_HEAD_CHARS].splitlines()[:60] if (s := ln.strip())][:50]
-    listed = sum(s.startswith("[") and s.endswith("]") for s in lines)
-    if len(lines) < 2 or listed < 0.8 * len(lines):
-        return None
-    return text.translate({ord("["): None, ord("]"): None})
+    pairs = (("[", "]"), ("(", ")"))
+    for left, right in pairs:
+        listed = sum(s.startswith(left) and s.endswith(right) for s in lines)
+        if len(lines) >= 2 and listed >= 0.8 * len(lines):
+            return text.translate({ord(left): None, ord(right): None})
+    return None
 
 
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -882,7 +911,10 @@ def _read_text(
     big = tail_raw is not None
     text, enc = _decode(raw, path, notes, partial=big)
     if (unbracketed := _unbracket(text)) is not None:
-        notes.append("lines of JSON lists ('[[ax, ay, az], ...]') read as rows of their numbers")
+        notes.append(
+            "lines of bracketed lists ('[[ax, ay, az], ...]', '((ax, ay, az), ...)') read as "
+            "rows of their numbers"
+        )
         if big:  # read it all: the rows are parsed from this text, not from the file
             unbracketed = _unbracket(_decode(_read_bytes(path), path, [])[0])
             big, tail_raw = False, None
@@ -1860,17 +1892,29 @@ def _assemble(
     def _numeric(j: int) -> bool:
         return bool(np.isfinite(data[: min(len(data), 1000), j]).any())
 
+    def _ticks(j: int) -> bool:
+        """The column holds numbers that change on most rows: a clock of whole seconds
+        ('05:34:44', now read as seconds) beside a millisecond counter does not."""
+        col = data[: min(len(data), 1000), j]
+        col = col[np.isfinite(col)]
+        return bool(col.size > 1 and np.mean(np.diff(col) != 0) > 0.5) and _rising(col)
+
     if header is not None:
         again: dict[str, int] = {}  # a name read a second time: its first such column
         for j, h in enumerate(header):
             canon = canonical_name(h)
             if canon is not None and canon not in source:
                 source[canon] = j
-            elif canon == "t" and mapping is None and not _numeric(source["t"]) and _numeric(j):
-                # a clock of text ('Time(hh:mm:ss)', read as NaN) before one of numbers
+            elif (
+                canon == "t"
+                and mapping is None
+                and (_numeric(j) > _numeric(source["t"]) or _ticks(j) > _ticks(source["t"]))
+            ):
+                # a clock of whole seconds or of text ('Time(hh:mm:ss)') before a counter
                 # ('Timestamp(Ms)'): TWLogger's order
                 notes.append(
-                    f"column {header[source['t']]!r} reads as t but holds no numbers: {h!r} is used"
+                    f"column {header[source['t']]!r} reads as t but does not tick with the rows: "
+                    f"{h!r} is used"
                 )
                 source["t"] = j
             elif canon is not None and mapping is None and source[canon] != j:
