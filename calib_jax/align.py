@@ -263,8 +263,22 @@ def block_jackknife_cov(estimates: np.ndarray) -> np.ndarray:
 NEGATIVE_DIP_DEG = 10.0
 """A dip below minus this says the field points up: south of the magnetic equator, or an
 accelerometer that reads gravity instead of the specific force (an iPhone 5's CoreMotion
-readings gave -52 deg where an Android phone in the same city gave +60; a new-user trial on
-tyrex-team's calibration recordings)."""
+readings gave -52 deg where an Android phone in the same city gave +60, and nothing said why;
+a new-user trial on tyrex-team's calibration recordings). The data cannot tell which, so it is
+said beside the dip (:func:`dip_reading`), not warned of: a southern site's every log would
+warn."""
+
+
+def dip_reading(dip_deg: float) -> str:
+    """What a dip below -:data:`NEGATIVE_DIP_DEG` can mean, for the line that reports it; ''
+    otherwise."""
+    if not dip_deg < -NEGATIVE_DIP_DEG:
+        return ""
+    return (
+        " (negative: the field points up, as south of the magnetic equator; north of it, "
+        "negate an accelerometer that reads gravity rather than the specific force, as iOS's "
+        "CoreMotion does, or pass hemisphere='north' for a left-handed magnetometer mount)"
+    )
 
 
 def time_blocks(n: int, k: int = JACKKNIFE_BLOCKS) -> np.ndarray:
@@ -521,15 +535,6 @@ def align_mag_to_accel(
             "the rotation is poorly determined (std. error above 1 degree); cover more orientations"
         )
     dip = float(theta - 90.0)
-    if dip < -NEGATIVE_DIP_DEG:
-        warn.append(
-            f"the dip is {dip:.1f} deg: the field points up from the horizontal, as it does only "
-            "south of the magnetic equator; north of it, the accelerometer reads gravity rather "
-            "than the specific force (a board lying flat should read +1 g on z; iOS's "
-            "CoreMotion accelerometer reads -1 g): negate its readings; or the magnetometer's "
-            "axes mirror the accelerometer's (a left-handed mount), which "
-            "align_mag_to_accel(hemisphere='north') resolves"
-        )
     return MagAccelAlignment(
         R_acc_from_mag=R,
         permutation=P,

@@ -24,7 +24,13 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .align import MagAccelAlignment, PlaneAlignment, align_mag_to_accel, plane_alignment
+from .align import (
+    MagAccelAlignment,
+    PlaneAlignment,
+    align_mag_to_accel,
+    dip_reading,
+    plane_alignment,
+)
 from .attitude import estimate_attitude
 from .calibration import (
     AccelCalibration,
@@ -313,7 +319,8 @@ class MARGRecord(Record):
             f"accel-mag alignment on {self.n_used} of {self.n_total} samples (|a|, |m| within "
             f"5 % of their medians): axes {self.permutation}; rotation {self.rotation_deg:.2f} "
             f"deg; dip {self.dip_deg:.2f} +- {self.dip_stderr_honest_deg:.2f} deg (block "
-            f"jackknife; formal +- {self.dip_stderr_deg:.2f}); spread of the "
+            f"jackknife; formal +- {self.dip_stderr_deg:.2f}){dip_reading(self.dip_deg)}; "
+            "spread of the "
             f"gravity-field angle {self.dip_std_before_deg:.2f} -> {self.dip_std_after_deg:.2f} "
             f"deg; {self.alignment_message}"
         )

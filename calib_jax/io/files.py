@@ -1522,9 +1522,9 @@ def _headerless_guess(
         sensor = which
     guess = _guess(width, sensor)
     if width in (6, 7) and _last_three_held(data):
-        # Android's uncalibrated events: x, y, z and the OS's bias estimate, constant for
-        # the whole log (a phone's gyroscope.txt, t x y z bx by bz); read as a second
-        # sensor they gave a gyro 'calibration' of constants and exit 0
+        # Android's uncalibrated events: x, y, z and the OS's bias estimate, held for long
+        # stretches (a phone's gyroscope.txt, t x y z bx by bz); read as a second sensor
+        # they gave a gyro 'calibration' of constants and exit 0
         which, named = _sensor_of_bare_columns(
             path,
             sensor,
