@@ -173,11 +173,10 @@ def _binary_kind(p: Path) -> str | None:
     return "a binary file" if b"\x00" in head else None
 
 
-def _unreadable(path: str, why: str) -> ValueError:
+def _unreadable(path: str, why: str, named: bool = False) -> ValueError:
+    """``named``: the loader named the file's format and how to convert it
+    (:class:`calib_jax.io.files.ConvertibleFile`), which says more than its kind."""
     kind = _binary_kind(Path(path))
-    named = "is not a text log (" in why and not any(
-        w in why for w in ("NUL bytes", "undecodable characters")
-    )  # the loader named the format (a PX4 ULog, an ArduPilot .bin) and how to convert it
     if kind is not None and not named:  # the loader's reason quotes binary junk: say the kind
         return ValueError(
             f"{path} is {kind}, not a text log (CSV, TSV, whitespace-separated) or a MATLAB "
@@ -225,8 +224,10 @@ def load_input(
         raise ValueError(f"{path}: cannot read it: {exc.strerror or exc}") from exc
     # a file the loader chokes on, in any way, is an input problem
     except Exception as exc:  # noqa: BLE001
+        from .io.files import ConvertibleFile
+
         why = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
-        raise _unreadable(path, why) from exc
+        raise _unreadable(path, why, named=isinstance(exc, ConvertibleFile)) from exc
     if len(log) == 0:
         raise ValueError(f"{path} has no data rows")
     _LOADER_NOTES.extend(log.notes)

@@ -439,9 +439,19 @@ def _decompress(raw: bytes, path: Path, notes: list[str]) -> tuple[bytes, bool]:
     return raw, False
 
 
+class ConvertibleFile(ValueError):
+    """A binary log whose format the loader names, with the converter whose output it reads
+    (a PX4 ULog, an ArduPilot .bin): the CLI keeps this message instead of its own 'a binary
+    file'."""
+
+
 def _binary(path: Path, what: str, how: str | None = None) -> ValueError:
-    how = how or "export it as CSV or text with one row per sample (or a MATLAB .mat file)"
-    return ValueError(f"{path} is not a text log ({what}); {how}")
+    if how is not None:
+        return ConvertibleFile(f"{path} is not a text log ({what}); {how}")
+    return ValueError(
+        f"{path} is not a text log ({what}); export it as CSV or text with one row per sample "
+        "(or a MATLAB .mat file)"
+    )
 
 
 def _decode(raw: bytes, path: Path, notes: list[str], partial: bool = False) -> tuple[str, str]:
