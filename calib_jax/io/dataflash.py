@@ -66,9 +66,13 @@ def _group(name: str) -> str:
     return re.sub(r"\d+$", "", name)
 
 
-def _rows(lines: list[str], names: set[str], widths: dict[str, int]) -> dict[str, np.ndarray]:
-    """The numeric rows of the messages ``names`` (cells that are no number read as NaN)."""
+def _rows(
+    lines: list[str], names: set[str], widths: dict[str, int], notes: list[str]
+) -> dict[str, np.ndarray]:
+    """The numeric rows of the messages ``names`` (cells that are no number read as NaN);
+    rows whose field count is not their FMT line's are skipped and counted in ``notes``."""
     out: dict[str, list[list[float]]] = {n: [] for n in names}
+    skipped: Counter = Counter()
     for line in lines:
         head, _, rest = line.partition(",")
         name = head.strip()
@@ -76,6 +80,7 @@ def _rows(lines: list[str], names: set[str], widths: dict[str, int]) -> dict[str
             continue
         cells = rest.split(",")
         if len(cells) != widths[name]:
+            skipped[name] += 1
             continue
         row = []
         for c in cells:
@@ -84,6 +89,11 @@ def _rows(lines: list[str], names: set[str], widths: dict[str, int]) -> dict[str
             except ValueError:
                 row.append(np.nan)
         out[name].append(row)
+    if skipped:
+        notes.append(
+            "rows skipped for a number of fields other than their FMT line's: "
+            + ", ".join(f"{n} {k}" for n, k in sorted(skipped.items()))
+        )
     return {n: np.array(r, float).reshape(-1, widths[n]) for n, r in out.items()}
 
 
@@ -169,7 +179,7 @@ def read_dataflash(text: str, path, sensor: str | None, notes: list[str]):
     imu = _family(formats, counts, "a") if prefix == "m" else None
     if imu is not None:
         want |= set(imu[0])
-    rows = _rows(lines, want, widths)
+    rows = _rows(lines, want, widths, notes)
     header, data = _stacked(rows, names, cols)
     canon = _canon(header)
     units = {p: u for p, u in _UNITS.items() if p in _sensor_columns(header)}
