@@ -7,8 +7,10 @@ guessed columns, units of time); a plain text log is streamed ``chunk_rows`` lin
 so memory does not grow with its length. Compressed and MAT files are read whole.
 
 The output CSV holds one row per data row of the log, in order: ``t`` (seconds, as the loader
-reads the time column), the corrected ``ax, ay, az``, ``gx, gy, gz`` and ``mx, my, mz`` (each
-triad the calibration corrects; the others as read), and the temperature unchanged. Rows
+reads the time column; without one, the row number over the sample rate where that is known,
+given or stated above the data), the corrected ``ax, ay, az``, ``gx, gy, gz`` and
+``mx, my, mz`` (each triad the calibration corrects; the others as read), and the temperature
+unchanged. Rows
 with a non-finite cell keep it (NaN in, NaN out); rows with the wrong number of fields are
 skipped, as every command skips them, and counted.
 Numbers are written with 12 significant digits (the time with 17), more than any sensor
@@ -22,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import atomic_write, off_scale
+from .calibration import OffScaleWarning, atomic_write, off_scale
 from .export import G_STANDARD, Correction, corrections
 from .io.files import SensorLog, iter_rows, load_log
 
@@ -107,7 +109,7 @@ def _off_scale_notes(use: dict[str, Correction], acc: np.ndarray | None) -> list
         return []
     import warnings
 
-    warnings.warn(why, stacklevel=3)
+    warnings.warn(why, OffScaleWarning, stacklevel=3)
     return [why]
 
 
@@ -175,11 +177,15 @@ def apply_calibration(
     return _write(out, _stream(log, head, use, chunk_rows), head, corr, True)
 
 
-def _columns(log: SensorLog) -> dict[str, np.ndarray]:
-    """The output columns of a (corrected) log, in the output's order."""
+def _columns(log: SensorLog, first_row: int = 0) -> dict[str, np.ndarray]:
+    """The output columns of a (corrected) log, in the output's order; a log without a time
+    column whose rate is known (given, or stated above the data) gets ``t`` from it, the row
+    ``first_row`` at ``first_row / rate``."""
     cols: dict[str, np.ndarray] = {}
     if log.t is not None:
         cols["t"] = log.t
+    elif log.sample_rate:
+        cols["t"] = (first_row + np.arange(len(log))) / log.sample_rate
     for attr, p, _ in _TRIADS:
         x = getattr(log, attr)
         if x is not None:
@@ -194,8 +200,9 @@ def _stream(path, head: SensorLog, use: dict[str, Correction], chunk_rows: int):
     (``use``: the correction of each of the log's triads, from :func:`_plan`)."""
     lay = head.layout
     src = lay["source"]
+    done = 0
     for block, bad in iter_rows(path, lay, chunk_rows):
-        part = SensorLog(acc=None)
+        part = SensorLog(acc=None, sample_rate=head.sample_rate)
         if "t" in src:
             part.t = block[:, src["t"]] * lay["time_scale"]
         if "temp" in src:
@@ -207,7 +214,8 @@ def _stream(path, head: SensorLog, use: dict[str, Correction], chunk_rows: int):
         }
         for attr, x in (raw | _corrected(use, raw)).items():
             setattr(part, attr, x)
-        yield _columns(part), bad
+        yield _columns(part, done), bad
+        done += len(block)
 
 
 def _write(out, blocks, head: SensorLog, corr, streamed: bool) -> ApplyReport:
@@ -233,6 +241,11 @@ def _write(out, blocks, head: SensorLog, corr, streamed: bool) -> ApplyReport:
                 np.savetxt(fh, table, fmt=fmt, delimiter=",")
                 rows += n
     notes = list(head.notes) + plan_notes + [n for c in use.values() for n in c.notes]
+    if head.t is None and head.sample_rate and names and "t" in names:
+        notes.append(
+            f"t is the row number over the sample rate ({head.sample_rate:g} Hz): the log has "
+            "no time column"
+        )
     if skipped:
         notes.append(
             f"{skipped} row{'s' if skipped > 1 else ''} had the wrong number of fields and "

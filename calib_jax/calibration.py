@@ -27,6 +27,11 @@ FORMAT_VERSION = 1
 MODELS = ("accel9", "accel6")
 
 
+class OffScaleWarning(UserWarning):
+    """Calibrated readings far from the calibration's magnitude: readings in another unit, or
+    of another sensor (:func:`off_scale`); ``calib-jax apply`` exits 1 on it."""
+
+
 class FitStatusWarning(UserWarning):
     """A calibration whose status is not ok. The result's ``status`` and ``warnings`` say the
     same, so the CLI, which prints them, leaves this one out; filter it the same way when you
@@ -750,7 +755,7 @@ def _warn_if_off_scale(y: np.ndarray, expected: float, units: str, what: str) ->
     if why:
         import warnings
 
-        warnings.warn(why, stacklevel=3)
+        warnings.warn(why, OffScaleWarning, stacklevel=3)
 
 
 def _check_params_kind(params, wanted: str, record: str) -> None:
@@ -883,6 +888,10 @@ MAG_MODELS = ("sphere", "diag", "full")
 _field = field  # MagCalibration has an attribute named field
 
 
+HONEST_METHOD = "block jackknife over contiguous stretches of the log"
+"""How the honest standard errors of a magnetometer's calibration were found (JSON and report)."""
+
+
 @dataclass(frozen=True, eq=False)
 class MagCalibration(SensorCalibration):
     """Outcome of :func:`calib_jax.calibrate_mag`: y = W (raw - center), |y| = radius.
@@ -922,6 +931,23 @@ class MagCalibration(SensorCalibration):
     sensor: str = "mag"
     model_selection: dict = _field(default_factory=dict)
     """Per candidate model: BIC and the RMS of |W (x - c)| / radius - 1 in percent."""
+    stderr_center_honest: np.ndarray = _field(default_factory=lambda: np.full(3, np.nan))
+    """The centre's standard errors from a block jackknife over contiguous stretches of the
+    log (:func:`calib_jax.mag.honest_stderr`): honest where the samples are correlated, as a
+    tumble's are; ``stderr_center`` assumes independent samples. NaN: not measured."""
+    stderr_soft_iron_honest: np.ndarray = _field(default_factory=lambda: np.full((3, 3), np.nan))
+    """W's, the same way."""
+
+    @property
+    def honest(self) -> bool:
+        """Whether the honest (block jackknife) standard errors were measured."""
+        return bool(np.all(np.isfinite(self.stderr_center_honest)))
+
+    @property
+    def center_stderr(self) -> np.ndarray:
+        """The centre's standard errors to quote: the honest ones where measured, else the
+        formal ones (on CK-Explorer's tumble the honest are 14-22x the formal)."""
+        return self.stderr_center_honest if self.honest else self.stderr_center
 
     def apply(self, raw) -> np.ndarray:
         """Calibrated vectors W (raw - center) for one reading (3,), many (N, 3), or a loaded
@@ -1093,8 +1119,13 @@ class MagCalibration(SensorCalibration):
                 else "(coverage not measured: no shell to measure it on)"
             ),
             ("center (hard iron): " if mag else "center (bias): ")
-            + ", ".join(f"{v:.6g} +- {e:.2g}" for v, e in zip(c, sc, strict=True))
-            + f" {unit}",
+            + ", ".join(f"{v:.6g} +- {e:.2g}" for v, e in zip(c, self.center_stderr, strict=True))
+            + f" {unit}"
+            + (
+                f" ({HONEST_METHOD}; formal +- " + ", ".join(f"{e:.2g}" for e in sc) + ")"
+                if self.honest
+                else ""
+            ),
             "soft iron W:" if mag else "gain and cross-axis matrix W:",
             *("  " + "  ".join(f"{v:+.6f}" for v in row) for row in self.soft_iron),
             "semi-axes: " + ", ".join(f"{v:.6g}" for v in self.semi_axes) + f" {unit}; "
@@ -1142,6 +1173,11 @@ class MagCalibration(SensorCalibration):
                 "stderr": {
                     "center": np.asarray(self.stderr_center).tolist(),
                     "soft_iron": np.asarray(self.stderr_soft_iron).tolist(),
+                    "honest": {
+                        "method": HONEST_METHOD,
+                        "center": np.asarray(self.stderr_center_honest).tolist(),
+                        "soft_iron": np.asarray(self.stderr_soft_iron_honest).tolist(),
+                    },
                 },
                 **self._solver_dict(),
                 "n_samples": self.n_samples,
@@ -1162,6 +1198,7 @@ class MagCalibration(SensorCalibration):
                 f"of {MAG_MODELS}"
             )
         W = r.invertible("soft_iron")
+        nan3, nan33 = [np.nan] * 3, [[np.nan] * 3] * 3
         ms = r.get("model_selection", {})
         if not isinstance(ms, dict):
             raise ValueError(f"{r.where}key 'model_selection' must be an object, got {ms!r}")
@@ -1178,6 +1215,11 @@ class MagCalibration(SensorCalibration):
             dcm=r.arr("dcm", (3, 3), finite=False),
             stderr_center=r.arr("stderr.center", (3,), finite=False),
             stderr_soft_iron=r.arr("stderr.soft_iron", (3, 3), finite=False),
+            # files written before the honest errors were have none: NaN, not measured
+            stderr_center_honest=r.arr("stderr.honest.center", (3,), finite=False, default=nan3),
+            stderr_soft_iron_honest=r.arr(
+                "stderr.honest.soft_iron", (3, 3), finite=False, default=nan33
+            ),
             n_samples=r.integer("n_samples"),
             coverage=r.num("coverage", finite=False),
             field=None if r.get("field", None) is None else r.num("field", positive=True),

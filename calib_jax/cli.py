@@ -723,6 +723,7 @@ def run_gyro(args: argparse.Namespace) -> int:
 
 def run_apply(args: argparse.Namespace) -> int:
     from .apply import apply_calibration
+    from .calibration import OffScaleWarning
     from .export import read, status_warnings
 
     corr = read(args.calibration, sensor=args.sensor)
@@ -747,12 +748,19 @@ def run_apply(args: argparse.Namespace) -> int:
     except (UnicodeError, OSError) as exc:
         raise _unreadable(args.file, f"cannot read it: {exc}") from exc
     said = [str(w.message) for w in caught]
+    off = [w for w in caught if issubclass(w.category, OffScaleWarning)]
     for w in said:  # readings in another unit: a warning, not again among the notes
         print(f"warning: {w}", file=sys.stderr)
     rep.notes = [n for n in rep.notes if n not in said]
     print(f"calib-jax apply: {args.calibration} -> {args.file}")
     print(rep.report())
-    return 0
+    if off:  # written, as asked, but not usable: a script checking the exit code must know
+        print(
+            f"error: {rep.out} was written, but its readings are not in the calibration's unit "
+            "(the warning above); check the log's unit and columns",
+            file=sys.stderr,
+        )
+    return 1 if off else 0
 
 
 def run_export(args: argparse.Namespace) -> int:

@@ -105,7 +105,7 @@ def mag_html(cal) -> str:
     label = "hard iron" if cal.sensor == "mag" else "bias"
     rows = [
         [f"center {a} ({label})", v, e, unit]
-        for a, v, e in zip("xyz", cal.center, cal.stderr_center, strict=True)
+        for a, v, e in zip("xyz", cal.center, cal.center_stderr, strict=True)
     ]
     rows += [[f"semi-axis {i + 1}", v, None, unit] for i, v in enumerate(cal.semi_axes)]
     rows.append(["radius after", cal.radius, None, unit if cal.field is None else "field"])
@@ -120,7 +120,8 @@ def mag_html(cal) -> str:
     if len(cal.model_selection) > 1:
         sel = [[m, v.get("bic"), v.get("rms_pct")] for m, v in cal.model_selection.items()]
         summary += table(["model", "BIC", "rms %"], sel)
-    body = table(["parameter", "value", "std. error", "unit"], rows) + W + summary
+    how = "std. error (block jackknife)" if cal.honest else "std. error"
+    body = table(["parameter", "value", how, "unit"], rows) + W + summary
     title = f"MagCalibration ({cal.sensor}, model {cal.model})"
     return _card(title, cal.status, body + _lists(cal.warnings, cal.notes))
 

@@ -297,6 +297,52 @@ def _fit_from_moments(S, *, solver: str, model: str, **options):
     return res, c, M, natural_radius(M)
 
 
+HONEST_MIN_BLOCK = 50
+"""Samples a jackknife block needs at the least (fewer: no honest errors, NaN)."""
+
+
+def honest_stderr(
+    xn: np.ndarray,
+    model: str,
+    solver: str,
+    opts: tuple,
+    mean: np.ndarray,
+    scale: float,
+    field: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Standard errors of the centre (3,) and W (3, 3), in the returned calibration's units,
+    from a block jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS` contiguous stretches
+    of the normalised samples ``xn`` in time order (issue 15): honest where the samples are
+    correlated, as a tumble's are, where the formal errors assume independent samples.
+
+    Each refit leaves one stretch out of the moment matrix (the batch's form of the same chi2:
+    the stretch's moments subtracted, one compiled fit for all). NaN when a stretch is shorter
+    than :data:`HONEST_MIN_BLOCK` samples or a refit does not converge to a finite W."""
+    from .align import JACKKNIFE_BLOCKS, block_jackknife_cov
+
+    k = JACKKNIFE_BLOCKS
+    nan = (np.full(3, np.nan), np.full((3, 3), np.nan))
+    if len(xn) < k * HONEST_MIN_BLOCK:
+        return nan
+    edges = np.linspace(0, len(xn), k + 1).astype(int)
+    blocks = [xn[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    chunk = min(MOMENT_FORM_ABOVE, 1 << int(np.ceil(np.log2(max(map(len, blocks))))))
+    S_blocks = [moments_of(b, chunk) for b in blocks]
+    S_all = sum(S_blocks)
+    fit = _fit_program(solver, model, opts, moments=True)
+    raw = _raw_calibration(model)
+    estimates = []
+    for S_b in S_blocks:
+        res, _, _, _ = fit(S_all - S_b)
+        c, W, _ = raw(res.params, res.covariance, mean, scale, np.nan if field is None else field)
+        c, W = np.asarray(c), np.asarray(W)
+        if not (is_converged(int(res.status)) and np.all(np.isfinite(W))):
+            return nan
+        estimates.append(np.concatenate([c, W.ravel()]))
+    se = np.sqrt(np.clip(np.diag(block_jackknife_cov(np.array(estimates))), 0.0, None))
+    return se[:3], se[3:].reshape(3, 3)
+
+
 def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str], str | None]:
     """(N, 3) float vectors, the source path, the loader's notes and the unit the column
     names state (None: not stated), from an array, a log or a file."""
@@ -591,6 +637,7 @@ def calibrate_mag(
     stderr_center = se[:3]
     stderr_soft_iron = se[3:].reshape(3, 3)
     se_n = np.asarray(res.stderr, float)
+    se_center_honest, se_w_honest = honest_stderr(xn, chosen, solver, opts, mean, s, field)
 
     solver_status = int(res.status)
     runaway = not float(natural_radius(M_n, np)) < RUNAWAY
@@ -671,10 +718,12 @@ def calibrate_mag(
         dcm=R,
         stderr_center=stderr_center,
         stderr_soft_iron=stderr_soft_iron,
+        stderr_center_honest=se_center_honest,
+        stderr_soft_iron_honest=se_w_honest,
         condition=float(res.condition),
         solver=solver,
         solver_status=solver_status,
-        solver_message=status_message(solver_status),
+        solver_message=status_message(solver_status, refused=status == "failed" and bool(warn)),
         iterations=int(res.iterations),
         n_samples=int(len(xv)),
         coverage=float(frac),

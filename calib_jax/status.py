@@ -103,8 +103,16 @@ _MESSAGES = {
 }
 
 
-def status_message(status: int) -> str:
-    """Human-readable message for a status code."""
+def status_message(status: int, refused: bool = False) -> str:
+    """Human-readable message for a status code. ``refused``: the data were refused for
+    what they are (a sensor held still, no shell), so an iteration budget that ran out says
+    that more iterations will not help instead of how to raise it (a new-user trial was told
+    both on one screen, raised --max-iter, and got the same refusal)."""
+    if refused and Status(int(status)) == Status.MAX_ITERATIONS:
+        return (
+            "not converged: the iteration budget ran out, and more iterations will not help: "
+            "the data are no calibration (the warnings say why)"
+        )
     return _MESSAGES[Status(int(status))]
 
 

@@ -472,6 +472,27 @@ def test_xsens_rates_and_fusion_outputs(tmp_path):
     assert load_log(raw).sample_rate == 60.0
 
 
+def test_actilife_raw_export_states_its_rate_in_the_banner(tmp_path):
+    """ActiLife's raw export (paulhibbing/AGread's exampleRAW.csv, MIT: a new-user trial)
+    states its rate only in the banner above the data, '... date format M/d/yyyy at 90 Hz
+    Filter Normal ---': it was fitted in samples, and refused with 'all poses lie near one
+    plane' for three perpendicular faces. The rate is read; 'Filter ... 488 Hz' in a settings
+    line does not count, nor a word ending in 'at'."""
+    banner = (
+        "------------ Data File Created By ActiGraph GT3X+ ActiLife v6.13.3 Firmware v1.7.2 "
+        "date format M/d/yyyy at 90 Hz  Filter Normal -----------,,"
+    )
+    head = [banner, "Serial Number: TAS1E31150129,,", "Start Time 08:58:00,,",
+            "Epoch Period (hh:mm:ss) 00:00:00,,", "-" * 50 + ",,",
+            "Accelerometer X,Accelerometer Y,Accelerometer Z"]  # fmt: skip
+    rows = "".join(f"{0.01 * (i % 3)},-0.008,0.961\n" for i in range(40))
+    log = load_log(_write(tmp_path, "\n".join(head) + "\n" + rows, "exampleRAW.csv"))
+    assert log.sample_rate == 90.0 and log.t is None
+    other = [f"Device format {x} Hz,," for x in ("flat 488", "at488")] + head[1:]
+    log = load_log(_write(tmp_path, "\n".join(other) + "\n" + rows, "b.csv"))
+    assert log.sample_rate is None
+
+
 def test_units_and_rate_stated_in_comment_lines_above_headerless_data(tmp_path):
     """sensbiotk's FOX logs (GPL-3, not shipped) open with comment lines only: the column
     names, then '# Units:' and one line per sensor ('#\tMagneto: gauss'). The names were read

@@ -672,6 +672,40 @@ def test_python_callers_mistakes_are_named():
         cj.calibrate_marg(tumble.mag, tumble.acc)
 
 
+def test_apply_on_the_command_line_exits_1_on_the_wrong_unit_and_times_rows_by_the_rate(
+    tmp_path, capsys
+):
+    """A new-user trial: ``calib-jax apply`` of an Xsens record (counts) to a log in g wrote
+    |a| of 79 m/s^2 on every axis, warned, and exited 0 (a script took it for success); and
+    ``--sample-rate 90`` on a log without a time column wrote no ``t``. It now exits 1 with
+    the file written, and ``t`` is the row number over the rate (the streamed path too)."""
+    from calib_jax.cli import main
+
+    log = tmp_path / "in_g.csv"
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(300, 3))
+    np.savetxt(log, d / np.linalg.norm(d, axis=1, keepdims=True), delimiter=",",
+               header="ax,ay,az", comments="")  # fmt: skip
+    a = _accel_cal()
+    counts = _accel_cal(params=a.params * np.r_[np.full(6, 4000.0), np.full(3, 1.0)],
+                        input_units="counts")  # fmt: skip
+    cal = tmp_path / "counts.json"
+    counts.save(cal)
+    own = tmp_path / "own.json"
+    a.save(own)
+    out = tmp_path / "out.csv"
+    assert main(["apply", str(cal), str(log), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "not in counts" in err and f"{out} was written" in err
+    assert out.read_text().startswith("ax,ay,az\n")  # no rate: no t
+    for chunk in ("100", "1000000"):  # streamed in blocks of 100 rows, and read whole
+        args = ["apply", str(own), str(log), "--out", str(out), "--sample-rate", "90"]
+        assert main([*args, "--chunk-rows", chunk]) == 0
+        table = np.loadtxt(out, delimiter=",", skiprows=1)
+        np.testing.assert_allclose(table[:, 0], np.arange(300) / 90.0, rtol=1e-15)
+        assert "row number over the sample rate (90 Hz)" in capsys.readouterr().out
+
+
 def test_records_equal_whenever_fitted_and_apply_to_a_file_says_the_unit_is_wrong(tmp_path):
     """A Python user's trial (2026-11-28): two fits of one log a second apart were unequal
     (``==`` compared the fit's date), and an Xsens record (counts) applied to a log in g

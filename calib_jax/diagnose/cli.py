@@ -16,12 +16,9 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cli import _enable_x64, detector_options, load_args
+    from ..cli import _enable_x64, load_args
 
     _enable_x64()
-    from ..accel import MAGNETOMETER_IN_GAUSS
-    from .loop import diagnose_accel, diagnose_mag
-
     # marg: a headerless 6-column file is accelerometer then magnetometer (as for mag)
     log = load_args(args, sensor="mag" if args.sensor == "marg" else args.sensor)
     guessed = ""
@@ -37,10 +34,21 @@ def run(args: argparse.Namespace) -> int:
                 "g-sensitivity, drift and temperature, and its scale for asymmetry"
             )
         if args.sensor == "accel" and (guess := _sensor_guessed(log, args.file)):
-            guessed = (
-                f"note: {guess} diagnosed as an accelerometer; for a magnetometer give --sensor mag"
-            )
+            guessed = f"note: {guess} diagnosed as an accelerometer; for a magnetometer give --sensor mag"  # said once, after the summary or the error (a trial read it twice)
+    try:
+        return _diagnose(args, log, guessed, defaulted)
+    except ValueError:
+        if guessed:  # before the error line, which names what was refused
             print(guessed, file=sys.stderr)
+        raise
+
+
+def _diagnose(args, log, guessed: str, defaulted: bool) -> int:
+    """The diagnosis of the loaded log, its summary and outputs; the exit code."""
+    from ..accel import MAGNETOMETER_IN_GAUSS
+    from ..cli import detector_options, load_args
+    from .loop import diagnose_accel, diagnose_mag
+
     detector = detector_options(args, args.sample_rate or log.sample_rate)
     if detector and args.sensor != "accel":
         print(
@@ -116,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         return 2
+    if guessed:
+        print(guessed, file=sys.stderr)
     return 0
 
 

@@ -618,6 +618,14 @@ def _rate_in_comment(line: str) -> float | None:
         return None
 
 
+def _rate_in_banner(line: str) -> float | None:
+    """The rate in a device's banner line above the data, as ActiLife writes it: '---- Data
+    File Created By ActiGraph GT3X+ ActiLife v6.13.3 ... date format M/d/yyyy at 90 Hz
+    Filter Normal ----' (a new-user trial's raw export was fitted in samples, not seconds)."""
+    m = re.search(r"(?<![a-z])at\s+([0-9]+(?:\.[0-9]+)?)\s*hz\b", line, re.I)
+    return float(m.group(1)) if m else None
+
+
 def _start_and_rate_rows(rows: list[list[str]], num, value) -> tuple[float, float] | None:
     """Empatica E4's header (ACC.csv, BVP.csv, ...): before the samples, a row of the start
     time in Unix seconds and a row of the sample rate in Hz, each the same in every column.
@@ -1138,6 +1146,8 @@ def _read_text(
         elif len(cells) == 2 and (rate := _rate_in_comment(" ".join(cells))) is not None:
             preamble["sample rate"] = rate  # 'OutputRate:,60Hz' (Xsens DOT)
         else:
+            if (rate := _rate_in_banner(ln)) is not None:
+                preamble["sample rate"] = rate
             ignored.append(ln.strip())
     if ignored:
         _refuse_epoch_counts(path, ignored)
