@@ -677,8 +677,9 @@ def calibrate_mag(
     ):
         # nor a coverage: directions about a 'centre' that is the field say nothing
         warn[:] = [w for w in warn if "ran away" not in w and "sphere of directions" not in w]
+        what = "gravity" if sensor == "accel" else "the field"
         warn.append(
-            f"the field barely changes in the sensor frame: the samples spread by {s:.3g} "
+            f"{what} barely changes in the sensor frame: the samples spread by {s:.3g} "
             f"(RMS), within {BARELY_TURNED:g}x of their sample-to-sample noise, and "
             + (
                 "the only shell through them runs away, far larger than the data"
@@ -686,7 +687,7 @@ def calibrate_mag(
                 else f"lie on no shell (RMS radial error {rms_after:.3g} % after the fit)"
             )
             + ": the sensor was hardly "
-            "turned and this is no calibration (the 'centre' is the field itself). Record a "
+            f"turned and this is no calibration (the 'centre' is {what} itself). Record a "
             "slow tumble through all orientations"
         )
         status = "failed"

@@ -535,6 +535,23 @@ def test_a_long_still_magnetometer_whose_noise_ball_fits_well_is_no_calibration(
     assert any("the field barely changes" in w for w in cal.warnings), cal.warnings
     assert not any("column mapping" in w for w in cal.warnings), cal.warnings
     assert np.isnan(cal.coverage)
+    # refused for what the data are, a budget that ran out is not advice to raise it (a trial
+    # was told both, raised --max-iter, and got the same refusal)
+    from calib_jax.status import Status, status_message
+
+    ran_out = status_message(Status.MAX_ITERATIONS, refused=True)
+    assert "will not help" in ran_out and "--max-iter" not in ran_out
+    assert "--max-iter" in status_message(Status.MAX_ITERATIONS)
+    assert status_message(Status.CONVERGED_CHI2, refused=True) == status_message(
+        Status.CONVERGED_CHI2
+    )
+    assert cal.solver_message == status_message(cal.solver_status, refused=True)
+    # an accelerometer lying still (ActiGraph's IMU example, a new-user trial) is named so:
+    # 'the field barely changes' was said of its gravity
+    with pytest.warns(cj.FitStatusWarning):
+        acc = cj.calibrate_mag(still / 226.0, sensor="accel")
+    assert any(w.startswith("gravity barely changes") for w in acc.warnings), acc.warnings
+    assert "'centre' is gravity itself" in acc.warnings[-1]
 
 
 def test_an_accelerometer_without_gravity_is_named_so():
