@@ -34,7 +34,10 @@ def run(args: argparse.Namespace) -> int:
                 "g-sensitivity, drift and temperature, and its scale for asymmetry"
             )
         if args.sensor == "accel" and (guess := _sensor_guessed(log, args.file)):
-            guessed = f"note: {guess} diagnosed as an accelerometer; for a magnetometer give --sensor mag"  # said once, after the summary or the error (a trial read it twice)
+            # said once, after the summary or the error (a trial read it twice)
+            guessed = (
+                f"note: {guess} diagnosed as an accelerometer; for a magnetometer give --sensor mag"
+            )
     try:
         return _diagnose(args, log, guessed, defaulted)
     except ValueError:
