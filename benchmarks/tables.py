@@ -1,6 +1,7 @@
-"""The tables of docs/performance.md that come from committed benchmark JSON, written from it.
+"""The tables of docs/performance.md (and close_the_loop.md's error table) that come from
+committed benchmark JSON, written from it.
 
-    .venv/bin/python benchmarks/tables.py           # rewrite the tables in docs/performance.md
+    .venv/bin/python benchmarks/tables.py           # rewrite the tables in the docs
     .venv/bin/python benchmarks/tables.py --check   # exit 1 if a table differs from its JSON
 
 Each table sits between ``<!-- generated: NAME -->`` and ``<!-- end: NAME -->``; the prose
@@ -108,12 +109,33 @@ def cli(results: Path = RESULTS) -> str:
     return "\n".join(lines)
 
 
+def mag_stderr(results: Path = RESULTS) -> str:
+    """benchmarks/mag_stderr.py: the formal and the jackknife errors over the true spread."""
+    d = json.loads((results / "mag_stderr.json").read_text())
+    lines = [
+        "| noise correlated over | formal / true (range) | jackknife / true (range) |",
+        "|---|---|---|",
+    ]
+    for r in d["rows"]:
+        when = "white" if r["rho"] == 0 else f"{r['correlated_over_s']:.1f} s"
+        f, h = r["formal_over_true_range"], r["honest_over_true_range"]
+        lines.append(
+            f"| {when} | {r['formal_over_true']:.2f} ({f[0]:.2f}-{f[1]:.2f}) "
+            f"| {r['honest_over_true']:.2f} ({h[0]:.2f}-{h[1]:.2f}) |"
+        )
+    return "\n".join(lines)
+
+
 TABLES = {"cli": cli, "batch-cpu": batch_cpu, "batch-gpu": batch_gpu}
+CLOSE_THE_LOOP = DOC.with_name("close_the_loop.md")
+OTHER_TABLES = {CLOSE_THE_LOOP: {"mag_stderr": mag_stderr}}
+"""Generated tables in other pages than performance.md, by page."""
 
 
-def render(text: str, results: Path = RESULTS) -> str:
-    """``text`` with every generated table written anew from the JSON."""
-    for name, make in TABLES.items():
+def render(text: str, results: Path = RESULTS, tables: dict | None = None) -> str:
+    """``text`` with every generated table written anew from the JSON (``tables``: name ->
+    maker, default performance.md's)."""
+    for name, make in (TABLES if tables is None else tables).items():
         pattern = re.compile(
             rf"(<!-- generated: {name} -->\n).*?(\n<!-- end: {name} -->)", flags=re.DOTALL
         )
@@ -127,16 +149,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--check", action="store_true", help="exit 1 if a table is out of date")
     args = ap.parse_args()
-    text = DOC.read_text()
-    new = render(text)
-    if args.check:
-        if new != text:
-            print(f"{DOC} is out of date: run benchmarks/tables.py", file=sys.stderr)
-            return 1
-        return 0
-    DOC.write_text(new)
-    print(f"wrote the tables of {DOC}")
-    return 0
+    stale = 0
+    for doc, tables in ((DOC, None), *OTHER_TABLES.items()):
+        text = doc.read_text()
+        new = render(text, tables=tables)
+        if args.check:
+            if new != text:
+                print(f"{doc} is out of date: run benchmarks/tables.py", file=sys.stderr)
+                stale = 1
+            continue
+        doc.write_text(new)
+        print(f"wrote the tables of {doc}")
+    return stale
 
 
 if __name__ == "__main__":
