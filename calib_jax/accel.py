@@ -604,7 +604,19 @@ def calibrate_accel(
     report, means, pts = obs.report, obs.means, obs.points
 
     asked = model
-    c_s, r_s, model = _check_poses_for(model, obs, sample_rate, notes)
+    try:
+        c_s, r_s, model = _check_poses_for(model, obs, sample_rate, notes)
+    except TooFewPoses as exc:
+        if units != "auto" or detect_units(obs.static_norm) is not None:
+            raise
+        # too few poses, and of no accelerometer's size: both, or the user fixes the poses
+        # and meets the second refusal next (an Axivity AX6 export at 0.07 'g', a trial)
+        raise TooFewPoses(
+            f"{exc.finding}. Besides, {no_accelerometer_unit(obs.static_norm)}",
+            exc.n_distinct,
+            exc.model,
+            exc.samples_tried,
+        ) from None
     static_norm = obs.static_norm
 
     fit_norm = r_s if use == "means" else float(np.median(np.linalg.norm(means - c_s, axis=1)))

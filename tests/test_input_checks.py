@@ -575,6 +575,16 @@ def test_an_accelerometer_without_gravity_is_named_so():
         cj.calibrate_accel(dead, sample_rate=100.0)
     with pytest.raises(ValueError, match="magnetometer reads exactly 0"):
         cj.calibrate_mag(dead)
+    # one still pose of 0.07 'g' (wadpac/GGIR's Axivity AX6 test export, a trial): refused for
+    # its one pose alone, though its size fits no accelerometer: both are said now
+    still = np.array([0.007, 0.07, 0.008]) + 0.003 * rng.normal(size=(3000, 3))
+    with pytest.raises(ValueError, match=r"only 1 distinct pose.*Besides, the static readings "
+                       r"have median norm 0\.07.*run calib-jax gyro") as err:  # fmt: skip
+        cj.calibrate_accel(still, sample_rate=100.0)
+    assert isinstance(err.value, cj.observations.TooFewPoses)
+    with pytest.raises(ValueError, match="only 1 distinct pose") as err:  # counts: any size
+        cj.calibrate_accel(still, sample_rate=100.0, units="counts")
+    assert "Besides" not in str(err.value)
 
 
 def test_solver_options_are_checked_against_the_solver():
