@@ -64,6 +64,7 @@ from .observations import (
 from .padding import pad_rows
 from .runtime import disk_jit
 from .static import StaticReport, check_sample_rate, distinct_directions
+from .status import CONVERGED_STATUSES, Status
 
 G_STANDARD = 9.80665
 SOLVERS = ("lm1", "lm2", "lm3", "optimistix")
@@ -331,15 +332,21 @@ def no_accelerometer_unit(
     )
 
 
-def _nominal(x_static: np.ndarray, units: str, g: float) -> tuple[np.ndarray, float]:
-    """The 'before' conversion: offset and scale a user would assume without calibration.
+def _nominal(
+    x_static: np.ndarray, units: str, g: float, out_units: str | None = None
+) -> tuple[np.ndarray, float]:
+    """The 'before' conversion: offset and scale a user would assume without calibration
+    (readings / scale are in the output unit).
 
-    Physical units: none (offset 0, scale 1). Counts: offset 2^(bits-1) for unsigned data
-    (all readings positive and centred near mid-range, like imu_tk's 16-bit Xsens counts), else
-    0; scale = median static norm / g.
+    Physical units: offset 0, scale 1, or the unit's conversion to ``out_units`` (g to m/s^2:
+    1 / 9.80665; the 'before' of a log in g fitted to m/s^2 was 0.90, |a| in g over 9.81).
+    Counts: offset 2^(bits-1) for unsigned data (all readings positive and centred near
+    mid-range, like imu_tk's 16-bit Xsens counts), else 0; scale = median static norm / g.
     """
     if units != "counts":
-        return np.zeros(3), 1.0
+        in_ms2 = {"g": G_STANDARD, "m/s^2": 1.0}
+        a, b = in_ms2.get(units), in_ms2.get(_UNIT_ALIASES.get(str(out_units).lower(), units))
+        return np.zeros(3), (b / a if a and b else 1.0)
     offset = np.zeros(3)
     lo, hi = x_static.min(), x_static.max()
     if lo > 0:
@@ -673,7 +680,7 @@ def calibrate_accel(
 
     # errors before/after over interval means, noise floor from within-interval scatter
     x_static = x[report.mask & obs.valid]
-    offset, scale = _nominal(x_static, units, g)
+    offset, scale = _nominal(x_static, units, g, out_units)
     before = np.linalg.norm((means - offset) / scale, axis=1) / g - 1.0
     after, floor = interval_errors(params, g, x, report)
     if status != "failed" and (no_rests := not_rests(after, len(means))):
@@ -735,6 +742,17 @@ def calibrate_accel(
     return cal
 
 
+def not_at_rest(status, rms_relative):
+    """A converged accelerometer fit's status with NOT_AT_REST where its points leave at least
+    :data:`REST_FAIL` of g (inside jit: the batch's and the pipeline's form of
+    :func:`not_rests`; a whole log given where its static samples were meant gave gains 1 %
+    off, 19 of their standard errors, status ok: a Python user's trial)."""
+    converged = jnp.isin(status, jnp.asarray([int(c) for c in CONVERGED_STATUSES]))
+    return jnp.where(
+        converged & (rms_relative >= REST_FAIL), int(Status.NOT_AT_REST), status
+    ).astype(jnp.asarray(status).dtype)
+
+
 def not_rests(after: float, n_poses: int) -> str | None:
     """Why poses that leave ``after`` of g after the fit are no calibration (at least
     :data:`REST_FAIL`), else None: the one rule of the single fit and the batch."""
@@ -768,14 +786,28 @@ def _resolve_units(
     return units
 
 
+OUTPUT_G_RANGE = {"g": (0.99, 1.01), "m/s^2": (9.7, 9.9)}
+"""Gravity in each output unit it has (Earth's surface: 9.78-9.83 m/s^2); a ``g`` outside
+is another unit's number."""
+
+
 def _reference_magnitude(
     g: float | None, units: str, static_norm: float, output_units: str | None
 ) -> float:
     """g in output units: given, or 1 (g, counts) / 9.80665 (m/s^2). A given g off the data's
     unit (m/s^2 data with g = 1) would silently rescale the output, so it is refused unless
     ``output_units`` states the conversion."""
+    out = _UNIT_ALIASES.get(str(output_units).lower()) if output_units is not None else None
     if g is None:
-        g = G_STANDARD if units == "m/s^2" else 1.0
+        # the output unit, where it is one of gravity's, decides (output_units='m/s^2' alone
+        # gave readings in g labelled m/s^2, status ok: a ROS export 9.8x too small, a trial)
+        g = G_STANDARD if (out or units) == "m/s^2" else 1.0
+    elif out in OUTPUT_G_RANGE and not OUTPUT_G_RANGE[out][0] <= g <= OUTPUT_G_RANGE[out][1]:
+        lo, hi = OUTPUT_G_RANGE[out]
+        raise ValueError(
+            f"g={g:g} in the output unit {output_units!r}, where gravity is {lo:g}-{hi:g}: give "
+            f"the local gravity in {out} (or leave g out: {G_STANDARD if out == 'm/s^2' else 1:g})"
+        )
     elif output_units is None:
         from .batch import check_reference_magnitude
 

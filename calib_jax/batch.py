@@ -38,6 +38,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 
 from .accel import (
+    not_at_rest,
     FLAT_POSES,
     _units_from_norm,
     detect_units,
@@ -359,7 +360,7 @@ def _accel_one(S, mean, k, g, model, solver, options, min_points):
     rms = jnp.sqrt(res.chi2 / jnp.maximum(n, 1.0)) / 2.0
     # the semi-axes in units of the samples' spread k (a unit-radius fit of (x - mean) / k)
     radius = jnp.cbrt(jnp.abs(det3(alpha_matrix(pn))))
-    status = shell_status(jnp.where(pre >= 0, pre, res.status), rms, radius)
+    status = not_at_rest(shell_status(jnp.where(pre >= 0, pre, res.status), rms, radius), rms)
     return params, se_n * T, status, rms, res, pre >= 0
 
 

@@ -347,6 +347,7 @@ class AccelCalibration(SensorCalibration):
             corr = cov / np.outer(se, se)
         from .accel import implausible_gains
         from .geometry import NO_SHELL
+        from .status import Status
 
         x = np.asarray(points, float)
         x = x[np.all(np.isfinite(x), axis=1)]  # the rows the fit used (it masks the others)
@@ -388,7 +389,10 @@ class AccelCalibration(SensorCalibration):
             rms_before=float(np.sqrt(np.mean((norm / norm.mean() - 1.0) ** 2))),
             rms_after=rms_after,
             noise_floor=float("nan"),
-            warnings=[implausible] if implausible else [],
+            # points that include motion are refused by the fit itself (NOT_AT_REST): said
+            warnings=[implausible or outcome["solver_message"]]
+            if implausible or int(fit.status) == Status.NOT_AT_REST
+            else [],
             notes=[
                 "from calib_jax.pipeline.fit_accel: no pose detection; the gains' plausibility "
                 "checked, the coverage only as the fit does (one plane, one reading)"

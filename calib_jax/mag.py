@@ -32,7 +32,7 @@ from __future__ import annotations
 import functools
 import os
 import warnings as _warnings
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -301,6 +301,18 @@ HONEST_MIN_BLOCK = 50
 """Samples a jackknife block needs at the least (fewer: no honest errors, NaN)."""
 
 
+class HonestErrors(NamedTuple):
+    """Block-jackknife standard errors of a magnetometer fit (:func:`honest_stderr`)."""
+
+    center: np.ndarray
+    """(3,) the centre's, raw units."""
+    soft_iron: np.ndarray
+    """(3, 3) W's, output units per raw unit."""
+    normalised: np.ndarray
+    """The packed parameters' (units of the data's radius), as :func:`poorly_determined`
+    reads them."""
+
+
 def honest_stderr(
     xn: np.ndarray,
     model: str,
@@ -309,11 +321,11 @@ def honest_stderr(
     mean: np.ndarray,
     scale: float,
     field: float | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Standard errors of the centre (3,) and W (3, 3), in the returned calibration's units,
-    from a block jackknife over :data:`calib_jax.align.JACKKNIFE_BLOCKS` contiguous stretches
-    of the normalised samples ``xn`` in time order (issue 15): honest where the samples are
-    correlated, as a tumble's are, where the formal errors assume independent samples.
+) -> HonestErrors:
+    """Standard errors of the centre, W and the packed parameters from a block jackknife over
+    :data:`calib_jax.align.JACKKNIFE_BLOCKS` contiguous stretches of the normalised samples
+    ``xn`` in time order (issue 15): honest where the samples are correlated, as a tumble's
+    are, where the formal errors assume independent samples.
 
     Each refit leaves one stretch out of the moment matrix (the batch's form of the same chi2:
     the stretch's moments subtracted, one compiled fit for all). NaN when a stretch is shorter
@@ -321,7 +333,9 @@ def honest_stderr(
     from .align import JACKKNIFE_BLOCKS, block_jackknife_cov
 
     k = JACKKNIFE_BLOCKS
-    nan = (np.full(3, np.nan), np.full((3, 3), np.nan))
+    nan = HonestErrors(
+        np.full(3, np.nan), np.full((3, 3), np.nan), np.full(N_PARAMS[model], np.nan)
+    )
     if len(xn) < k * HONEST_MIN_BLOCK:
         return nan
     edges = np.linspace(0, len(xn), k + 1).astype(int)
@@ -338,9 +352,9 @@ def honest_stderr(
         c, W = np.asarray(c), np.asarray(W)
         if not (is_converged(int(res.status)) and np.all(np.isfinite(W))):
             return nan
-        estimates.append(np.concatenate([c, W.ravel()]))
+        estimates.append(np.concatenate([c, W.ravel(), np.asarray(res.params)]))
     se = np.sqrt(np.clip(np.diag(block_jackknife_cov(np.array(estimates))), 0.0, None))
-    return se[:3], se[3:].reshape(3, 3)
+    return HonestErrors(se[:3], se[3:12].reshape(3, 3), se[12:])
 
 
 def _input_vectors(data, sensor: str) -> tuple[np.ndarray, str | None, list[str], str | None]:
@@ -636,8 +650,9 @@ def calibrate_mag(
     se = np.sqrt(np.clip(np.diag(np.asarray(cov_cw)), 0.0, None))
     stderr_center = se[:3]
     stderr_soft_iron = se[3:].reshape(3, 3)
-    se_n = np.asarray(res.stderr, float)
-    se_center_honest, se_w_honest = honest_stderr(xn, chosen, solver, opts, mean, s, field)
+    honest = honest_stderr(xn, chosen, solver, opts, mean, s, field)
+    # the status reads the larger of the formal and the honest errors (NaN: not measured)
+    se_n = np.fmax(np.asarray(res.stderr, float), honest.normalised)
 
     solver_status = int(res.status)
     runaway = not float(natural_radius(M_n, np)) < RUNAWAY
@@ -658,6 +673,13 @@ def calibrate_mag(
     if status == "ok" and poor:
         status = "poorly_determined"
         warn.append(POORLY_DETERMINED.format(", ".join(poor)))
+        formal_poor = poorly_determined(res.stderr, chosen)
+        if len(formal_poor) < len(poor):
+            warn[-1] += (
+                f" ({', '.join(p for p in poor if p not in formal_poor)} by the block "
+                "jackknife's errors: the formal ones, which take the samples as independent, "
+                "are smaller)"
+            )
 
     frac, ny = _calibrated_coverage(xv, centre, W, status, warn)
     # relative radial errors, each made in place from its norms (a 3-hour 1 kHz log: 86 MB
@@ -719,8 +741,8 @@ def calibrate_mag(
         dcm=R,
         stderr_center=stderr_center,
         stderr_soft_iron=stderr_soft_iron,
-        stderr_center_honest=se_center_honest,
-        stderr_soft_iron_honest=se_w_honest,
+        stderr_center_honest=honest.center,
+        stderr_soft_iron_honest=honest.soft_iron,
         condition=float(res.condition),
         solver=solver,
         solver_status=solver_status,

@@ -59,7 +59,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int, Real
 
-from .accel import FLAT_POSES, fit_normalized
+from .accel import FLAT_POSES, fit_normalized, not_at_rest
 from .attitude import gauss_newton_quaternion, reference_vectors
 from .geometry import (
     centre_and_scale,
@@ -326,13 +326,16 @@ def _float_dtype(raw: jax.Array):
     return raw.dtype if jnp.issubdtype(raw.dtype, jnp.floating) else jnp.float64
 
 
-def _finish(params, res, cov, raw, w, magnitude, radius):
+def _finish(params, res, cov, raw, w, magnitude, radius, rests: bool = False):
     """The Fit, its status judged as the batch's (:func:`calib_jax.geometry.shell_status`:
     a noise cloud fits no shell; an ellipsoid ``radius`` times the samples' spread ran
-    away)."""
+    away; ``rests``, an accelerometer's: points that leave 3 % of g include motion,
+    :func:`calib_jax.accel.not_at_rest`)."""
     e = residual(params, raw, magnitude)
     rms = jnp.sqrt(jnp.sum(w * e * e) / jnp.sum(w))
     status = shell_status(res.status, rms / magnitude, radius)
+    if rests:
+        status = not_at_rest(status, rms / magnitude)
     return Fit(params=params, covariance=cov, status=status, rms=rms, iterations=res.iterations)
 
 
@@ -446,7 +449,7 @@ def _fit_accel(raw, magnitude, weights, *, update_type, max_iter, absolute_sigma
     cov = s * s * res.covariance
     # the semi-axes g eig(alpha_n) of the normalised fit, in units of the spread s
     radius = g * jnp.cbrt(jnp.abs(det3(alpha_matrix(pn))))
-    return _refuse(_finish(params, res, cov, raw, w, g, radius), code)
+    return _refuse(_finish(params, res, cov, raw, w, g, radius, rests=True), code)
 
 
 @_full_float32

@@ -48,9 +48,13 @@ class Status(enum.IntEnum):
     """Batch and pipeline fits: fitted, but the ellipsoid is over
     :data:`calib_jax.geometry.RUNAWAY` times the samples' spread: a cap of data too small
     (one pose held still) lets any large ellipsoid through; no calibration."""
+    NOT_AT_REST = 13
+    """Accelerometer batch and pipeline fits: fitted, but the points leave more than
+    :data:`calib_jax.accel.REST_FAIL` of g after the fit: they include motion (a whole log
+    given where its static samples were meant); no calibration."""
 
 
-NO_CALIBRATION = (Status.NO_SHELL, Status.RAN_AWAY)
+NO_CALIBRATION = (Status.NO_SHELL, Status.RAN_AWAY, Status.NOT_AT_REST)
 """Fitted, then refused by the batch's and the pipeline's checks after the fit
 (:func:`calib_jax.geometry.shell_status`): parameters exist but are no calibration."""
 
@@ -93,6 +97,12 @@ _MESSAGES = {
         "no calibration: the samples lie on no ellipsoid shell (RMS radial error above 12 %): "
         "a sensor held still (a noise cloud), motion, or a field that changed during the "
         "recording; record a tumble through all orientations"
+    ),
+    Status.NOT_AT_REST: (
+        "no calibration: the points leave more than 3 % of g after the fit, where readings "
+        "held still leave under 1 %: they include motion. Fit the static samples (a mask or "
+        "weights from calib_jax.static.detect_static) or the static intervals' means; "
+        "calibrate_accel finds them in a whole log"
     ),
     Status.RAN_AWAY: (
         "no calibration: the fitted ellipsoid is over 10 times the samples' spread, so the "

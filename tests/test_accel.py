@@ -282,8 +282,22 @@ def test_g_that_contradicts_the_unit_is_an_error(sim48):
     with pytest.raises(ValueError, match="does not match the data's unit"):
         cj.calibrate_accel(raw, g=1.0)
     cal = cj.calibrate_accel(raw, g=1.0, output_units="g")
-    gain_in_g = cj.calibrate_accel(sim48.raw).params[0]
-    assert cal.success and abs(cal.params[0] / 9.80665 - gain_in_g) < 1e-6
+    in_g = cj.calibrate_accel(sim48.raw)
+    assert cal.success and abs(cal.params[0] / 9.80665 - in_g.params[0]) < 1e-6
+    # the 'before' converts the unit as the output asks (it read |a| in m/s^2 against 1)
+    assert abs(cal.rms_before - in_g.rms_before) < 1e-12, (cal.rms_before, in_g.rms_before)
+    # the output unit alone sets g (a Python user's trial: output_units="m/s^2" without g
+    # gave readings in g labelled m/s^2, status ok, and a ROS export 9.8x too small)
+    to_ms2 = cj.calibrate_accel(sim48.raw, output_units="m/s^2")
+    assert to_ms2.g == 9.80665 and to_ms2.output_units == "m/s^2"
+    np.testing.assert_allclose(to_ms2.params[:6] * 9.80665, in_g.params[:6], rtol=1e-7)
+    assert abs(to_ms2.rms_before - in_g.rms_before) < 1e-12
+    norms = np.linalg.norm(to_ms2.apply(sim48.raw), axis=1)
+    assert abs(np.median(norms) - 9.80665) < 0.01
+    for units, bad in (("m/s^2", 1.0), ("m/s2", 1.0), ("g", 9.81)):  # another unit's gravity
+        with pytest.raises(ValueError, match=rf"g={bad:g} in the output unit .* where gravity"):
+            cj.calibrate_accel(sim48.raw, output_units=units, g=bad)
+    assert cj.calibrate_accel(sim48.raw, output_units="m/s^2", g=9.81744).g == 9.81744
 
 
 def test_declared_counts_are_never_refused_for_their_scale(sim48):
