@@ -38,12 +38,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, Real, Shaped
 
 from .accel import (
-    not_at_rest,
     FLAT_POSES,
     _units_from_norm,
     detect_units,
     initial_guess_moments,
     no_accelerometer_unit,
+    not_at_rest,
 )
 from .accel import MODELS as ACCEL_MODELS
 from .calibration import BatchRecord
