@@ -496,7 +496,7 @@ def _check_poses_for(
         notes.append(
             f"model accel6 (gains and biases; the cross terms held at zero): the log holds "
             f"{exc.n_distinct} distinct poses with each axis up and down, too few for paper "
-            "1's nine parameters (--model accel9 insists)"
+            "1's nine parameters (model='accel9', --model accel9, insists)"
         )
         return c_s, r_s, "accel6"
 
@@ -658,7 +658,7 @@ def calibrate_accel(
                 f"parameters {', '.join(fit.poor)} were poorly determined, the poses not "
                 "mixing the axes a cross term couples, and the cross terms explain little "
                 f"(chi2 {float(fit.res.chi2):.3g} with them, {float(six.res.chi2):.3g} "
-                "without); --model accel9 insists"
+                "without); model='accel9' (--model accel9) insists"
             )
             fit, model = six, "accel6"
     res, params, cov, stderr, corr = fit.res, fit.params, fit.cov, fit.stderr, fit.corr
@@ -780,8 +780,9 @@ def _resolve_units(
     if detected != units and units != "counts":
         raise ValueError(
             f"units={units!r}, but the static readings have norm {static_norm:.4g}, which looks "
-            f"like {detected or 'no known unit'} ({_UNIT_RANGES}); pass --units "
-            f"{detected or 'counts'} (or fix the scaling of the log)"
+            f"like {detected or 'no known unit'} ({_UNIT_RANGES}); pass units="
+            f"{detected or 'counts'!r} (--units {detected or 'counts'}), or fix the scaling of "
+            "the log"
         )
     return units
 
@@ -814,7 +815,9 @@ def _reference_magnitude(
         try:
             check_reference_magnitude(g, units, static_norm)
         except ValueError as exc:
-            raise ValueError(f"{exc}; or give the output unit (--out-units) to convert") from None
+            raise ValueError(
+                f"{exc}; or give the output unit (output_units=, --out-units) to convert"
+            ) from None
     if g <= 0 or not np.isfinite(g):
         raise ValueError(f"g must be a positive number, got {g}")
     return g
@@ -917,7 +920,7 @@ def implausible_gains(params_n) -> str | None:
         f"where any accelerometer's lie within {lo:g}-{hi:g} of it: the points do not determine "
         "the model, so the fit ran to a shape no sensor has. Most often motion was taken for "
         "poses (see the static-detection notes) or the poses are too few or too alike; more "
-        "iterations (--max-iter) will not help. Record the sensor held still in at least 9 "
+        "iterations will not help. Record the sensor held still in at least 9 "
         "distinct orientations; this is no calibration"
     )
 

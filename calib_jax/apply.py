@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .calibration import OffScaleWarning, atomic_write, off_scale
-from .export import G_STANDARD, Correction, corrections
+from .export import G_STANDARD, Correction, corrections, warn_unusable
 from .io.files import SensorLog, iter_rows, load_log
 
 _TRIADS = (("acc", "a", "accel"), ("gyro", "g", "gyro"), ("mag", "m", "mag"))
@@ -156,6 +156,7 @@ def apply_calibration(
         Lines per chunk when streaming.
     """
     corr = corrections(cal)
+    warn_unusable(corr)
     # a headerless 3- or 4-column log holds the one sensor a single-sensor calibration corrects
     hint = {"sensor": next(iter(corr))} if len(corr) == 1 else {}
     if isinstance(log, SensorLog):

@@ -73,21 +73,28 @@ class Record:
 
     def __eq__(self, other) -> bool:
         """Equal records write the same JSON, but for ``date`` (when the fit ran: two fits
-        of one log a second apart were unequal)."""
+        of one log a second apart were unequal) and ``source`` (how the log was named: a
+        path as typed, or none for an array; the same log by the command line and by Python
+        gave unequal records)."""
         if type(other) is not type(self):
             return NotImplemented
-        return _without_dates(self.to_dict()) == _without_dates(other.to_dict())
+        return _without_provenance(self.to_dict()) == _without_provenance(other.to_dict())
 
     __hash__ = None  # type: ignore[assignment]
 
 
-def _without_dates(d):
-    """A record's dict without its ``date`` keys, nested records' included (a MARG record
-    holds its sensors' records, each with the second its fit ran)."""
+_PROVENANCE = ("date", "source")
+"""Fields that say when a fit ran and how its log was named, not what it found: ``==`` on
+records leaves them out."""
+
+
+def _without_provenance(d):
+    """A record's dict without its ``date`` and ``source`` keys, nested records' included (a
+    MARG record holds its sensors' records, each with the second its fit ran)."""
     if isinstance(d, dict):
-        return {k: _without_dates(v) for k, v in d.items() if k != "date"}
+        return {k: _without_provenance(v) for k, v in d.items() if k not in _PROVENANCE}
     if isinstance(d, list):
-        return [_without_dates(v) for v in d]
+        return [_without_provenance(v) for v in d]
     return d
 
 
@@ -406,6 +413,7 @@ class AccelCalibration(SensorCalibration):
         """Calibrated acceleration in output units, a = alpha^-1 (raw - beta), for one
         reading (3,), many (N, 3), or a loaded log or a log's path (its ``acc`` columns; to
         write a corrected file, :func:`calib_jax.apply.apply_calibration`)."""
+        warn_if_unusable(self.status, self.what, self.source)
         a = apply_params(self.params, _raw_vectors(raw, "accel"))
         _warn_if_off_scale(a, self.g, f"{self.input_units} (this accelerometer's input)", "g")
         return a
@@ -762,6 +770,22 @@ def _warn_if_off_scale(y: np.ndarray, expected: float, units: str, what: str) ->
         warnings.warn(why, OffScaleWarning, stacklevel=3)
 
 
+def warn_if_unusable(status: str | None, what: str, source: str | None = None) -> None:
+    """A :class:`FitStatusWarning` where a calibration whose status is "failed" or
+    "not_converged" is used (applied, exported): a Python user's trial applied and exported
+    a failed record (gains 461, 1826 and 69) without a word, where the command line warns."""
+    if status in (None, "ok", "poorly_determined"):
+        return
+    import warnings
+
+    warnings.warn(
+        f"using {what} whose status is {status!r} (from {source or 'an unnamed log'}): it is "
+        "no calibration; its warnings say why",
+        FitStatusWarning,
+        stacklevel=3,
+    )
+
+
 def _check_params_kind(params, wanted: str, record: str) -> None:
     """A ValueError for a pipeline Fit, or another sensor's parameters, given to a
     ``from_params`` (they were float()'s TypeError)."""
@@ -819,7 +843,7 @@ def _fields_equal(a, b):
     return all(
         _value_equal(getattr(a, f.name), getattr(b, f.name))
         for f in _dc.fields(a)
-        if f.name != "date"  # when the fit ran, not what it found
+        if f.name not in _PROVENANCE
     )
 
 
@@ -958,6 +982,7 @@ class MagCalibration(SensorCalibration):
         log or a log's path (its ``mag`` columns, ``acc`` for an accelerometer fit), in
         host-side numpy; inside JAX use
         :func:`calib_jax.models.mag.compensate`."""
+        warn_if_unusable(self.status, self.what, self.source)
         x = _raw_vectors(raw, self.sensor)
         y = (x - self.center) @ self.soft_iron.T
         what = "g" if self.sensor == "accel" else "the field"

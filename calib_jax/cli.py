@@ -723,7 +723,7 @@ def run_gyro(args: argparse.Namespace) -> int:
 
 def run_apply(args: argparse.Namespace) -> int:
     from .apply import apply_calibration
-    from .calibration import OffScaleWarning
+    from .calibration import FitStatusWarning, OffScaleWarning
     from .export import read, status_warnings
 
     corr = read(args.calibration, sensor=args.sensor)
@@ -747,7 +747,8 @@ def run_apply(args: argparse.Namespace) -> int:
             )
     except (UnicodeError, OSError) as exc:
         raise _unreadable(args.file, f"cannot read it: {exc}") from exc
-    said = [str(w.message) for w in caught]
+    # a failed calibration's warning was said above (status_warnings), once
+    said = [str(w.message) for w in caught if not issubclass(w.category, FitStatusWarning)]
     off = [w for w in caught if issubclass(w.category, OffScaleWarning)]
     for w in said:  # readings in another unit: a warning, not again among the notes
         print(f"warning: {w}", file=sys.stderr)

@@ -37,7 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import AccelCalibration, BatchRecord, MagCalibration, _read_json
+from .calibration import (
+    AccelCalibration,
+    BatchRecord,
+    MagCalibration,
+    _read_json,
+    warn_if_unusable,
+)
 from .models.layout import ALPHA_INDEX
 
 FORMATS = ("c", "imu_tk", "imucal", "ros")
@@ -267,9 +273,11 @@ def write(cal, fmt: str, *, sensor: str | None = None, name: str = "calib") -> s
     """The text of ``cal`` in format ``fmt`` (one of :data:`FORMATS`).
 
     ``sensor`` picks one triad for the single-triad formats (imu_tk, ros) when the calibration
-    holds two (MARG); ``name`` prefixes the C header's identifiers.
+    holds two (MARG); ``name`` prefixes the C header's identifiers. A calibration that
+    failed or did not converge is written, with a :class:`~calib_jax.FitStatusWarning`.
     """
     corr = corrections(cal)
+    warn_unusable(corr)
     if fmt == "c":
         return to_c_header(corr, name=name)
     if fmt == "imucal":
@@ -519,6 +527,12 @@ def save(cal, fmt: str, path: str | Path, **kw) -> Path:
 
 # ---------------------------------------------------------------------------------------------
 # readers
+
+
+def warn_unusable(corr: dict[str, Correction]) -> None:
+    """:func:`calib_jax.calibration.warn_if_unusable` for each correction."""
+    for name, c in corr.items():
+        warn_if_unusable(c.status, f"the {name} calibration", c.source)
 
 
 def status_warnings(corr: dict[str, Correction], sensor: str | None = None) -> list[str]:

@@ -34,6 +34,7 @@ from .calibration import (
     _sanitize,
     _unsanitize,
     linear_forms,
+    warn_if_unusable,
 )
 from .io.files import UNEVEN_STEPS, SensorLog, as_log, join_logs, rate_from_steps
 from .lm import fit_status, lm_solve, status_message
@@ -126,6 +127,7 @@ class GyroCalibration(SensorCalibration):
         log's path; ``acc`` the
         calibrated acceleration (m/s^2) of the same samples when G is not zero. Inside JAX
         use :meth:`to_params` (:class:`calib_jax.models.gyro.GyroParams`)."""
+        warn_if_unusable(self.status, self.what, self.source)
         x = _raw_vectors(raw, "gyro") - self.bias
         if acc is not None:
             x = x - np.asarray(acc, float) @ self.g_sensitivity.T

@@ -569,7 +569,7 @@ def _fit_candidates(xn, model, solver, opts, warn) -> tuple[dict, str, dict]:
         + (
             f"; {best} had the lowest BIC (rms {selection[best]['rms_pct']:.3g} % against "
             f"{selection['sphere']['rms_pct']:.3g} %), but its soft iron is not pinned down; "
-            "record more orientations, or declare it with --model"
+            "record more orientations, or declare it (model=..., --model)"
             if best != "sphere"
             else ""
         )

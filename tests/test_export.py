@@ -22,6 +22,7 @@ import pytest
 
 from calib_jax import export
 from calib_jax.apply import apply_calibration
+from calib_jax.calibration import FitStatusWarning
 from calib_jax.cli import demo_log_path, main
 from calib_jax.io import load_log
 
@@ -340,6 +341,23 @@ def test_apply_and_export_warn_of_a_calibration_that_is_not_ok(tmp_path, capsys)
         assert main(argv) == 0, argv
         said = capsys.readouterr().err
         assert "warning: the accel calibration's status is 'poorly_determined'" in said, argv
+    # a failed one: once on the command line, and in Python, where apply and export said
+    # nothing (a Python user's trial applied and exported gains of 461, 1826 and 69)
+    failed = dataclasses.replace(_accel_cal(), status="failed")
+    failed.save(cal)
+    assert main(["apply", str(cal), str(log)]) == 0
+    assert capsys.readouterr().err.count("status is 'failed'") == 1
+    for use in (
+        lambda: failed.apply(np.ones((5, 3))),
+        lambda: export.write(failed, "c"),
+        lambda: apply_calibration(failed, log),
+        lambda: apply_calibration(str(cal), log, tmp_path / "o.csv"),
+    ):
+        with pytest.warns(FitStatusWarning, match="status is 'failed'.*no calibration"):
+            use()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FitStatusWarning)
+        dataclasses.replace(failed, status="poorly_determined").apply(np.ones((5, 3)))
 
 
 def _write_mag(tmp_path):

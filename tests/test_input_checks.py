@@ -746,13 +746,16 @@ def test_records_equal_whenever_fitted_and_apply_to_a_file_says_the_unit_is_wron
     a = _accel_cal()
     assert a == dataclasses.replace(a, date="2001-01-01T00:00:00+00:00")
     assert a != dataclasses.replace(a, params=a.params * 1.001)
+    # nor how the log was named (a path as typed, none for an array: a Python user's trial)
+    assert a == dataclasses.replace(a, source="../repo/log.csv")
+    assert a != dataclasses.replace(a, sensor_id="board-2")  # which sensor it is still counts
     # a MARG record's dict nests its sensors' records, each with its own date (a review)
-    from calib_jax.calibration import _without_dates
+    from calib_jax.calibration import _without_provenance
 
     marg = {"kind": "marg", "date": "x", "accel": a.to_dict(), "mag": {"date": "y", "k": [1]}}
-    assert _without_dates(marg) == {"kind": "marg", "accel": _without_dates(a.to_dict()),
+    assert _without_provenance(marg) == {"kind": "marg", "accel": _without_provenance(a.to_dict()),
                                     "mag": {"k": [1]}}  # fmt: skip
-    assert "date" in a.to_dict() and "date" not in _without_dates(a.to_dict())
+    assert "date" in a.to_dict() and "date" not in _without_provenance(a.to_dict())
     log = tmp_path / "in_g.csv"
     rng = np.random.default_rng(5)
     d = rng.normal(size=(200, 3))

@@ -326,7 +326,7 @@ class SensorLog:
             raise ValueError(
                 f"{self.path}: the log has no {sensor} columns ({cols})"
                 + (f"; it holds {' and '.join(have)} columns only" if have else "")
-                + "; map them with --columns if they are there under other names"
+                + f"; map them with {COLUMNS_OPTION} if they are there under other names"
             )
         return np.asarray(x, float)
 
@@ -1252,6 +1252,9 @@ def _header_cells(line: str, delim: str | None) -> list[str]:
     return [_strip_cell(c).lstrip("\ufeff") for c in cells]
 
 
+COLUMNS_OPTION = "--columns (columns= of load_log in Python)"
+"""How a loader message names the column mapping, for the command line and for Python (a
+Python user read 'pass --columns' in every report)."""
 _RATE_KEYS = (
     "fs", "sample rate", "sample_rate", "samplerate", "rate", "hz", "frequency",
     "sampling rate", "sampling frequency", "sample frequency", "data rate", "output rate",
@@ -1952,7 +1955,7 @@ def _assemble(
             source.update({c: bare[a] for c, a in zip(cols, "xyz", strict=True)})
             notes.append(
                 f"columns {names_xyz} name no sensor: read as {' '.join(cols)} ({why}); pass "
-                "--columns to override"
+                f"{COLUMNS_OPTION} to override"
             )
     elif mapping is None:
         labels = _label_columns(data)
@@ -1968,8 +1971,8 @@ def _assemble(
             cols, why = _headerless_guess(path, width, data, sensor)
         source = {c: i for i, c in enumerate(cols) if c != "_"}
         notes.append(
-            f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass --columns "
-            "to override"
+            f"headerless {width}-column file read as {' '.join(cols)} ({why}); pass "
+            f"{COLUMNS_OPTION} to override"
         )
 
     data, layout = _one_instance(path, header, data, instance, notes), tab.layout
