@@ -804,6 +804,11 @@ def _raw_vectors(raw, sensor: str) -> np.ndarray:
     of a log file (read with :func:`calib_jax.load_log`)."""
     from .io.files import SensorLog, load_log
 
+    if "Tracer" in type(raw).__name__:  # jax.jit(cal.apply): TracerArrayConversionError
+        raise TypeError(
+            f"{sensor} calibration's apply works on host arrays (numpy); inside jit, grad or "
+            "vmap use calib_jax.pipeline.apply(cal.to_params(), raw)"
+        )
     if isinstance(raw, (str, os.PathLike)):  # was "could not convert string to float"
         raw = load_log(raw, sensor=sensor)
     x = raw.vectors(sensor) if isinstance(raw, SensorLog) else np.asarray(raw, float)

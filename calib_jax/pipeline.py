@@ -194,7 +194,18 @@ Calibration = AccelParams | MagParams
 @_full_float32
 def apply(params: Calibration | MargParams, *raw: jax.Array):
     """Calibrated samples: ``apply(accel_or_mag_params, raw)`` -> (..., 3), or
-    ``apply(marg_params, acc_raw, mag_raw)`` -> (acc, mag) in the accelerometer's frame."""
+    ``apply(marg_params, acc_raw, mag_raw)`` -> (acc, mag) in the accelerometer's frame.
+    ``raw`` may be any array-like (a list, numpy) whose last axis is x, y, z. A record
+    (``AccelCalibration``, ...) is taken outside jit; under jit give ``cal.to_params()``."""
+    if hasattr(params, "to_params") and not isinstance(params, eqx.Module):
+        params = params.to_params()  # a record, outside jit (jit takes only its pytree)
+    raw = tuple(jnp.asarray(r) for r in raw)
+    for r in raw:
+        if r.ndim == 0 or r.shape[-1] != 3:  # was a broadcasting error from inside JAX
+            raise ValueError(
+                f"raw must be (..., 3), the last axis x, y, z, got shape {r.shape}"
+                + (" (transposed? pass raw.T)" if r.ndim == 2 and r.shape[0] == 3 else "")
+            )
     return params.apply(*raw)
 
 
@@ -416,6 +427,8 @@ def _check_readings(raw, fit: str) -> None:
 def _check_magnitude(magnitude) -> None:
     """The concrete check of :func:`_magnitude_ok`, before the jitted fit (which sees a
     traced magnitude and can only mark the fit FAILED)."""
+    if isinstance(magnitude, str | bytes):  # was a 53-line dtype error from inside JAX
+        raise ValueError(f"magnitude must be a number, got the string {magnitude!r}")
     if not isinstance(magnitude, jax.core.Tracer) and jnp.ndim(magnitude) == 0:
         _magnitude_ok(jnp.asarray(magnitude))  # a shape error is _prepare's to name
 
@@ -483,6 +496,8 @@ def fit_mag(
     """
     _check_readings(raw, "fit_mag")
     _check_magnitude(magnitude)
+    if model not in N_PARAMS:  # was KeyError: 'ellipsoid'
+        raise ValueError(f"model must be one of {', '.join(N_PARAMS)}, got {model!r}")
     return _fit_mag(
         raw,
         magnitude,

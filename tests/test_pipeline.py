@@ -109,6 +109,20 @@ def test_bad_input_says_what_to_change():
         pl.fit_accel(jnp.asarray(ACC), jnp.ones(2))
     with pytest.raises(ValueError, match=r"\(S, N, 3\)"):
         pl.fit_batch(pl.fit_accel, jnp.asarray(ACC))
+    # a Python user's trial: a KeyError, a 53-line dtype error, a broadcasting error from
+    # inside JAX, and TracerArrayConversionError, each now says what to change
+    with pytest.raises(ValueError, match="model must be one of sphere, diag, full"):
+        pl.fit_mag(jnp.asarray(MAG), 1.0, model="ellipsoid")
+    with pytest.raises(ValueError, match="magnitude must be a number, got the string '9.81'"):
+        pl.fit_accel(jnp.asarray(ACC), "9.81")
+    params = pl.AccelParams(jnp.ones(3), jnp.zeros(3), jnp.zeros(3))
+    with pytest.raises(ValueError, match=r"got shape \(3, \d+\) \(transposed\? pass raw.T\)"):
+        pl.apply(params, jnp.asarray(ACC[:20]).T)
+    np.testing.assert_array_equal(pl.apply(params, ACC[:4].tolist()), ACC[:4])  # a list
+    cal = cj.AccelCalibration.from_params(params, g=1.0)
+    np.testing.assert_array_equal(pl.apply(cal, ACC[:4]), ACC[:4])  # a record, outside jit
+    with pytest.raises(TypeError, match=r"inside jit.*pipeline.apply\(cal.to_params\(\), raw\)"):
+        jax.jit(cal.apply)(jnp.asarray(ACC[:4]))
 
 
 def test_integer_counts_keep_a_float_magnitude(fits):
