@@ -145,8 +145,8 @@ def apply_calibration(
     ----------
     cal : calibration object, dict or path
         Anything :func:`calib_jax.export.corrections` takes.
-    log : path or SensorLog
-        The log to correct.
+    log : path, SensorLog or (N, 3) array
+        The log to correct (an array: of the one sensor the calibration corrects).
     out : path, optional
         Write the corrected log here as CSV (streamed, see the module docstring) and return an
         :class:`ApplyReport`. Without it, return the corrected :class:`SensorLog` in memory.
@@ -159,6 +159,8 @@ def apply_calibration(
     warn_unusable(corr)
     # a headerless 3- or 4-column log holds the one sensor a single-sensor calibration corrects
     hint = {"sensor": next(iter(corr))} if len(corr) == 1 else {}
+    if not isinstance(log, SensorLog | str | Path):  # an array (was os.fspath's TypeError)
+        log = _array_log(log, corr)
     if isinstance(log, SensorLog):
         if out is None:
             return correct_log(corr, log)
@@ -176,6 +178,20 @@ def apply_calibration(
         fixed = _corrected_log(use, head)
         return _write(out, [(_columns(fixed), 0)], head, corr, False)
     return _write(out, _stream(log, head, use, chunk_rows), head, corr, True)
+
+
+def _array_log(x, corr: dict[str, Correction]) -> SensorLog:
+    """An (N, 3) array as the log of the one sensor the calibration corrects."""
+    x = np.asarray(x, float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"log must be a path, a SensorLog or an (N, 3) array, got {x.shape}")
+    if len(corr) != 1:
+        raise ValueError(
+            f"the calibration corrects {' and '.join(corr)}: an array does not say which "
+            "sensor it holds; pass a SensorLog (calib_jax.load_log) or a path"
+        )
+    attr = next(a for a, _, s in _TRIADS if s in corr)
+    return SensorLog(**{"acc": None, attr: x})
 
 
 def _columns(log: SensorLog, first_row: int = 0) -> dict[str, np.ndarray]:

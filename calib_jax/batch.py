@@ -456,6 +456,18 @@ def sensor_bucket(n: int, devices: int = 1) -> int:
     return max(step, -(-n // step) * step)
 
 
+def _stackable(raw) -> None:
+    """A ValueError for a list of logs of different lengths (numpy's 'inhomogeneous shape'
+    was the error a trial met), naming the helper that pads them."""
+    if isinstance(raw, list | tuple) and len({np.shape(r)[:1] for r in raw}) > 1:
+        lengths = ", ".join(str(len(r)) for r in raw[:6]) + (", ..." if len(raw) > 6 else "")
+        raise ValueError(
+            f"the logs have different lengths ({lengths}): pad them into one (sensors, "
+            "samples, 3) array with weights, raw, w = calib_jax.padding.stack_rows(logs), and "
+            "pass mask=w > 0"
+        )
+
+
 def _prepare(raw, mask, ref, shard):
     raw = jnp.asarray(raw)
     if raw.ndim != 3 or raw.shape[-1] != 3:
@@ -561,6 +573,7 @@ def calibrate_accel_batch(
         raise ValueError(f"model must be one of {tuple(ACCEL_MODELS)}, got {model!r}")
     if solver not in ("lm1", "lm2", "lm3", "optimistix"):
         raise ValueError(f"solver must be lm1, lm2, lm3 or optimistix, got {solver!r}")
+    _stackable(raw)
     n = np.shape(raw)[0]
     g = check_magnitude(g, "g", n)
     raw, valid, ref = _prepare(raw, mask, g, shard)
@@ -592,6 +605,7 @@ def calibrate_mag_batch(
         raise ValueError(f"model must be one of {tuple(N_PARAMS)}, got {model!r}")
     if solver not in ("lm1", "lm2", "lm3", "optimistix"):
         raise ValueError(f"solver must be lm1, lm2, lm3 or optimistix, got {solver!r}")
+    _stackable(raw)
     n = np.shape(raw)[0]
     field = np.nan if field is None else check_magnitude(field, "field", n)
     raw, valid, ref = _prepare(raw, mask, field, shard)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses as _dc
 import datetime as _dt
+import errno
 import json
 import math
 import os
@@ -356,7 +357,9 @@ class AccelCalibration(SensorCalibration):
         from .geometry import NO_SHELL
         from .status import Status
 
-        x = np.asarray(points, float)
+        x = _raw_vectors(points, "accel")
+        if x.ndim != 2:
+            raise ValueError(f"points must be the (N, 3) readings the fit was given, got {x.shape}")
         x = x[np.all(np.isfinite(x), axis=1)]  # the rows the fit used (it masks the others)
         a = apply_params(p, x)
         g = float(g)
@@ -815,6 +818,7 @@ def _raw_vectors(raw, sensor: str) -> np.ndarray:
     if x.ndim not in (1, 2) or x.shape[-1] != 3:
         raise ValueError(
             f"raw must be one reading (3,) or many (N, 3), columns x, y, z; got shape {x.shape}"
+            + (" (transposed? pass raw.T)" if x.ndim == 2 and x.shape[0] == 3 else "")
         )
     return x
 
@@ -860,7 +864,11 @@ def atomic_write(path: str | Path, suffix: str = ".tmp", newline: str | None = N
     user's group). On an error (a full disk: OSError ENOSPC) the temporary file is removed and
     the error re-raised; ``path`` keeps its old content, or stays absent, never a truncated
     file."""
-    path = Path(path)
+    path = Path(path).expanduser()  # '~/cal.json' named a folder '~' (a trial)
+    if not path.parent.is_dir():  # the temporary file's name was the error's (a trial)
+        raise FileNotFoundError(
+            errno.ENOENT, f"cannot write {path}: its folder {path.parent} does not exist"
+        )
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
     try:
         if hasattr(os, "fchmod"):
@@ -887,6 +895,12 @@ def write_json_atomic(path: str | Path, obj) -> None:
 
 def _check_version(d: dict, where: str = "") -> None:
     version = d.get("format_version")
+    if version is None and "kind" not in d:  # not ours at all: no 'upgrade calib_jax' advice
+        keys = ", ".join(list(d)[:6]) or "none"
+        raise ValueError(
+            f"{where}not a calib_jax calibration (no 'format_version' or 'kind'; its keys: "
+            f"{keys}); calib_jax.export.read reads imucal, imu_tk and ROS files"
+        )
     if version != FORMAT_VERSION:
         raise ValueError(
             f"{where}calibration format_version {version!r} is not supported (this calib_jax "
@@ -1076,7 +1090,9 @@ class MagCalibration(SensorCalibration):
         c = np.asarray(fit.params.hard_iron, float)
         W = np.asarray(fit.params.soft_iron, float)
         se = np.sqrt(np.clip(np.diag(np.asarray(fit.covariance, float)), 0.0, None))
-        x = np.asarray(raw, float)
+        x = _raw_vectors(raw, sensor)
+        if x.ndim != 2:
+            raise ValueError(f"raw must be the (N, 3) samples the fit was given, got {x.shape}")
         y = (x - c) @ W.T
         r_y = np.linalg.norm(y, axis=1)
         radius = float(field)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calibration import AccelCalibration
+from .calibration import AccelCalibration, _raw_vectors
 from .sphere import cell_hits, sphere_cells
 
 
@@ -114,7 +114,7 @@ def _accel_points(cal: AccelCalibration):
 def _mag_points(cal, raw: np.ndarray, max_points: int = 5000):
     """Samples (at most ``max_points``, evenly spaced in time) before (centred on the mean,
     scaled to its mean norm, as ``rms_before_pct``) and after compensation, in radii."""
-    raw = np.asarray(raw, float)
+    raw = _raw_vectors(raw, cal.sensor)  # an array, a loaded log or its path, as cal.apply
     raw = raw[np.all(np.isfinite(raw), axis=1)]
     raw = raw[:: max(1, len(raw) // max_points)]
     centred = raw - raw.mean(axis=0)

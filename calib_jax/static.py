@@ -941,6 +941,11 @@ def detect_static(
     _check_options(window, threshold, threshold_factor, min_duration, min_samples, trim)
     check_sample_rate(sample_rate)
     x = np.asarray(x, float)
+    if x.ndim != 2 or x.shape[1] != 3:  # was a numpy broadcasting error (a trial's x.T)
+        raise ValueError(
+            f"readings must be (samples, 3), got shape {x.shape}"
+            + (" (transposed? pass x.T)" if x.ndim == 2 and x.shape[0] == 3 else "")
+        )
     n = len(x)
     valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
     if block is not None:

@@ -494,6 +494,20 @@ def test_actilife_raw_export_states_its_rate_in_the_banner(tmp_path):
     assert log.sample_rate is None
 
 
+def test_a_table_saved_one_row_per_axis_is_named_transposed(tmp_path):
+    """A Python user's trial saved np.savetxt(G.T): 3 rows of 16,000 numbers was 'no data
+    rows' (each line longer than the head the loader reads), and 3 rows of 200 'no header and
+    200 columns' with a 200-name --columns example. Both now say transposed, and how to fix."""
+    x = np.random.default_rng(0).normal(size=(16000, 3))
+    for n, name in ((200, "short.csv"), (16000, "long.csv")):
+        path = tmp_path / name
+        np.savetxt(path, x[:n].T, delimiter=",")
+        with pytest.raises(ValueError, match=rf"holds 3 row\(s\) of {n} numbers: one row per axis"):
+            load_log(path)
+    np.savetxt(tmp_path / "ok.csv", x[:200], delimiter=",")  # the same numbers the right way
+    assert load_log(tmp_path / "ok.csv").acc.shape == (200, 3)
+
+
 def test_units_and_rate_stated_in_comment_lines_above_headerless_data(tmp_path):
     """sensbiotk's FOX logs (GPL-3, not shipped) open with comment lines only: the column
     names, then '# Units:' and one line per sensor ('#\tMagneto: gauss'). The names were read

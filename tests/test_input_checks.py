@@ -771,3 +771,40 @@ def test_records_equal_whenever_fitted_and_apply_to_a_file_says_the_unit_is_wron
         warnings.simplefilter("error")
         res = apply_calibration(a, log, tmp_path / "own.csv")
     assert not any("median magnitude" in n for n in res.notes)
+
+
+@pytest.mark.wrong_types  # a list where the batch's annotation says an array
+def test_python_callers_get_calib_jax_errors_not_numpys(tmp_path):
+    """A Python user's trial met numpy's or the OS's errors where calib_jax knew better: a
+    list of logs of two lengths to the batch ('inhomogeneous shape'), detect_static and
+    from_fit of (3, N) readings (broadcasting), save() into a missing folder (the error named
+    a temporary file), a JSON that is no calibration ('format_version None ... upgrade
+    calib_jax'), apply_calibration of an array (os.fspath) and plot_mag of a loaded log."""
+    from calib_jax.apply import apply_calibration
+    from calib_jax.batch import calibrate_accel_batch
+    from calib_jax.static import detect_static
+
+    x = np.random.default_rng(0).normal(size=(500, 3))
+    with pytest.raises(ValueError, match=r"different lengths \(500, 400\).*stack_rows"):
+        calibrate_accel_batch([x, x[:400]])
+    with pytest.raises(ValueError, match=r"\(samples, 3\), got shape \(3, 500\) \(transposed"):
+        detect_static(x.T)
+    a = _accel_cal()
+    with pytest.raises(FileNotFoundError, match="its folder .*missing does not exist"):
+        a.save(tmp_path / "missing" / "cal.json")
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"name": "imu", "gains": [1, 2, 3]}))
+    with pytest.raises(ValueError, match=r"not a calib_jax calibration .*keys: name, gains"):
+        AccelCalibration.load(other)
+    out = apply_calibration(a, x, tmp_path / "out.csv")  # the one sensor a calibration holds
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "out.csv", delimiter=",", skiprows=1),
+                               a.apply(x), rtol=1e-11, atol=1e-11)  # fmt: skip
+    assert out.rows == 500
+    log = cj.load_log(cj.mag_demo_log_path())
+    mag = cj.calibrate_mag(log)
+    from calib_jax.plots import plot_mag
+
+    fig = plot_mag(mag, log)  # a loaded log, as calibrate_mag takes it
+    assert len(fig.axes) >= 2
+    with pytest.raises(ValueError, match=r"got shape \(3, 12000\) \(transposed\? pass raw.T\)"):
+        plot_mag(mag, log.mag.T)

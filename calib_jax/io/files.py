@@ -964,6 +964,10 @@ def _read_text(
     if not sample:
         if not text.strip():
             raise ValueError(f"{path} is empty: no rows to read")
+        if not whole:  # lines longer than the head read: a few rows of very many numbers?
+            rows = [ln for ln in _split_lines(whole_text()) if ln.strip() and not _skip(ln)]
+            cells = min(max(len(_cells(r, d)) for d in _DELIMS) for r in rows[:TRANSPOSED_ROWS])
+            _refuse_transposed(path, len(rows), cells)
         raise ValueError(f"{path} has no data rows (only blank or comment lines)")
     sample = sample[-200:] if len(sample) > 200 else sample
     try:
@@ -1568,6 +1572,7 @@ def _headerless_guess(
                 f"{path} has no header and only {width} column(s) per row; a sensor log "
                 "needs x, y and z (at least 3)"
             )
+        _refuse_transposed(path, len(data), width)
         # the example maps the sensor the file's name names (magnetometer-calibrated.txt's
         # five columns were offered as t,ax,ay,az,_); another command's sensor is refused
         timed = bool(len(data)) and _rising(data[:, 0])
@@ -1579,6 +1584,24 @@ def _headerless_guess(
         )
     cols, why = _time_last(guess[0], by_name or guess[1], data, path)
     return _gyro_before_accel(cols, why, data)
+
+
+TRANSPOSED_ROWS = 12
+"""A table of at most this many rows, each wider than it is long (and at least 20 numbers),
+holds one row per axis: a log saved transposed (MATLAB's 3 x N habit)."""
+
+
+def _refuse_transposed(path, rows: int, width: int) -> None:
+    """A ValueError for a table of a few rows of many numbers: a log saved one row per axis
+    (a trial's np.savetxt(G.T) was 'no data rows', a 3 x 200 table 'no header and 200
+    columns' with a 200-name --columns example)."""
+    if 1 <= rows <= TRANSPOSED_ROWS and width >= max(20, 2 * rows):
+        raise ValueError(
+            f"{path} holds {rows} row(s) of {width} numbers: one row per axis, the table "
+            "transposed; a log needs one row per sample. Save it the other way round (numpy: "
+            "np.savetxt(path, x.T, delimiter=',')), or read it with numpy.loadtxt(path, "
+            "delimiter=',').T and pass the (N, 3) array"
+        )
 
 
 def _label_columns(data: np.ndarray) -> list[int]:
