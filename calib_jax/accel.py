@@ -512,7 +512,7 @@ def calibrate_accel(
     units: Units = "auto",
     output_units: str | None = None,
     solver: str = "lm1",
-    model: Literal["accel9", "accel6", "auto"] = "accel9",
+    model: Literal["accel9", "accel6", "auto"] = "auto",
     use: Literal["means", "samples"] = "means",
     sample_rate: float | None = None,
     window: int | None = None,
@@ -545,9 +545,10 @@ def calibrate_accel(
         Gavin LM update type 1-3, or optimistix's LevenbergMarquardt.
     model : {"accel9", "accel6", "auto"}
         Paper 1's nine parameters, or six (gains and biases; non-orthogonality held at zero),
-        for six-face protocols that cannot determine the cross terms; "auto" (the CLI's
-        default) takes nine where the log holds nine distinct poses or more, else six where it
-        holds six (a note says so).
+        for six-face protocols that cannot determine the cross terms; "auto" (the default, as
+        ``calib-jax accel``'s: a Python user's trial got TooFewPoses for the log the command
+        fitted) takes nine where the log holds nine distinct poses or more and determines
+        them, else six where it holds each axis up and down (a note says so).
     use : {"means", "samples"}
         Fit the static-interval means (each pose weighs the same; default) or every static
         sample (paper 1's choice; long rests weigh more).
@@ -712,7 +713,8 @@ def calibrate_accel(
         solver=solver,
         model=model,
         solver_status=solver_status,
-        solver_message=status_message(solver_status),
+        # refused for what the data are: no advice to raise the budget beside "will not help"
+        solver_message=status_message(solver_status, refused=bool(refusal)),
         iterations=int(res.iterations),
         nfev=int(res.nfev),
         use=use,

@@ -67,8 +67,8 @@ def _check_accelerometer_unit(tumble_acc, acc) -> None:
 
 
 def calibrate_marg(
-    tumble_acc: np.ndarray,
-    tumble_mag: np.ndarray,
+    tumble_acc,
+    tumble_mag: np.ndarray | None = None,
     turn_acc: np.ndarray | None = None,
     turn_mag: np.ndarray | None = None,
     *,
@@ -85,7 +85,9 @@ def calibrate_marg(
     Parameters
     ----------
     tumble_acc, tumble_mag : (N, 3)
-        A free rotation through all orientations (slow, so the accelerometer sees gravity).
+        A free rotation through all orientations (slow, so the accelerometer sees gravity);
+        or a loaded log or a log's path alone, holding both (as ``calibrate_accel`` and
+        ``calibrate_mag`` take one; :func:`calibrate_marg_log` also finds its rests).
     turn_acc, turn_mag : (K, 3), optional
         A turn about the board's z axis with its XY plane on a fixed plane; without it the
         plane alignment is skipped.
@@ -93,6 +95,14 @@ def calibrate_marg(
         Compensate the accelerometer with its own ellipsoid (paper 2); False when it is
         already calibrated.
     """
+    if tumble_mag is None:  # a log or its path (a trial passed the log it had loaded)
+        log = as_log(tumble_acc, "mag")
+        if isinstance(log, np.ndarray) or getattr(log, "acc", None) is None or log.mag is None:
+            raise ValueError(
+                "calibrate_marg takes the tumble's accelerometer and magnetometer (N, 3) "
+                "arrays, or a log holding both (ax, ay, az, mx, my, mz)"
+            )
+        tumble_acc, tumble_mag = log.acc, log.mag
     warn: list[str] = []
     mag = calibrate_mag(tumble_mag, model=mag_model)
     acc = calibrate_mag(tumble_acc, model=acc_model, sensor="accel") if acc_ellipsoid else None

@@ -168,9 +168,13 @@ def test_too_few_poses_says_what_to_do():
     faces = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]])
     log = sim(5, faces)
     with pytest.raises(ValueError, match="only 6 distinct poses.*accel6"):
-        cj.calibrate_accel(log.raw, **DET)
+        cj.calibrate_accel(log.raw, model="accel9", **DET)
     cal = cj.calibrate_accel(log.raw, model="accel6", use="samples", **DET)
     assert cal.status == "ok" and np.all(cal.nonorth == 0)
+    # the default, as calib-jax accel's, is "auto": six faces get six parameters, said so
+    auto = cj.calibrate_accel(log.raw, use="samples", **DET)
+    assert auto.model == "accel6" and np.array_equal(auto.params, cal.params)
+    assert any(n.startswith("model accel6") for n in auto.notes), auto.notes
 
 
 def test_all_poses_in_one_plane_is_an_error():

@@ -805,6 +805,12 @@ def test_python_callers_get_calib_jax_errors_not_numpys(tmp_path):
     from calib_jax.plots import plot_mag
 
     fig = plot_mag(mag, log)  # a loaded log, as calibrate_mag takes it
+    # calibrate_marg took arrays only, and MARGRecord, which load errors name, was not
+    # calib_jax's to import
+    marg = cj.calibrate_marg(log)
+    assert isinstance(marg, cj.MARGRecord) and marg == cj.calibrate_marg(log.acc, log.mag)
+    with pytest.raises(ValueError, match="accelerometer and magnetometer"):
+        cj.calibrate_marg(log.mag)
     assert len(fig.axes) >= 2
     with pytest.raises(ValueError, match=r"got shape \(3, 12000\) \(transposed\? pass raw.T\)"):
         plot_mag(mag, log.mag.T)

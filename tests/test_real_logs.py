@@ -78,9 +78,11 @@ def test_imucal_session_in_physical_units():
         shared_file("imucal_ferraris/example_ferraris_session.csv"), sample_rate=102.4
     )
     with pytest.raises(ValueError, match="accel6"):
-        cj.calibrate_accel(log)  # six faces cannot fix nine parameters: a clear error
+        cj.calibrate_accel(log, model="accel9")  # six faces cannot fix nine: a clear error
     cal = cj.calibrate_accel(log, model="accel6")
     assert cal.input_units == "m/s^2" and cal.status == "ok"
+    auto = cj.calibrate_accel(log)  # the default ("auto", as the CLI's) takes six
+    assert auto.model == "accel6" and np.array_equal(auto.params, cal.params)
     # NOTES.md's independent fit: bias (0.535, -0.617, 0.398) m/s^2, inverse gains
     # (1.0036, 0.9975, 0.9768); its fit also had cross terms, hence 1e-3 / 5 mm/s^2
     np.testing.assert_allclose(cal.bias, [0.535, -0.617, 0.398], atol=5e-3)
@@ -353,7 +355,7 @@ def test_a_hand_held_walk_fitted_as_poses_is_no_calibration(tmp_path, capsys):
         assert main(["accel", str(path), *argv]) == 1
         out = capsys.readouterr().out
         assert "status: failed" in out and "no calibration" in out, out
-        assert "the fitted gains are" in out and "--max-iter) will not help" in out, out
+        assert "the fitted gains are" in out and "more iterations will not help" in out, out
     (tmp_path / path.name).write_bytes(path.read_bytes())
     main(["batch", str(tmp_path), "--no-progress", "--json", str(tmp_path / "b.json")])
     [entry] = json.loads((tmp_path / "b.json").read_text())["results"]
