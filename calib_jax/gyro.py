@@ -189,12 +189,25 @@ class GyroCalibration(SensorCalibration):
         out.append(
             f"bias b ({self.input_units}): " + ", ".join(f"{b:.6g} +- {s:.2g}" for b, s in pairs)
         )
-        out.append(
-            "imu_tk form: scale K = "
-            + ", ".join(f"{k:.6g}" for k in np.diag(K))
-            + "; misalignment T off-diagonal = "
-            + ", ".join(f"{T[i, j]:+.4f}" for i in range(3) for j in range(3) if i != j)
-        )
+        rows = np.linalg.norm(self.matrix, axis=1)
+        if np.all(np.abs(np.diag(self.matrix)) > 0.5 * rows):
+            out.append(
+                "imu_tk form: scale K = "
+                + ", ".join(f"{k:.6g}" for k in np.diag(K))
+                + "; misalignment T off-diagonal = "
+                + ", ".join(f"{T[i, j]:+.4f}" for i in range(3) for j in range(3) if i != j)
+            )
+        else:  # imu_tk's T (unit diagonal) K has no rotated axes: K near 0, T in thousands
+            axis = ["x", "y", "z"]
+            out.append(
+                "the gyro's axes are turned against the accelerometer's: its x, y, z read "
+                + ", ".join(
+                    f"{'+-'[int(self.matrix[j, i] < 0)]}{axis[j]}"
+                    for i, j in enumerate(np.argmax(np.abs(self.matrix), axis=0))
+                )
+                + " of the accelerometer's frame (C holds the turn; imu_tk's T K form, with "
+                "T's diagonal 1, cannot)"
+            )
         raw = "" if np.isnan(self.rms_raw_deg) else f"as read {self.rms_raw_deg:.3g}, "
         if np.any(self.g_sensitivity != 0):
             out.append(
@@ -871,10 +884,13 @@ def _allan_fields(g, intervals, bias, C, rate) -> dict:
 
 
 def _poorly_determined(stderr: np.ndarray, C: np.ndarray) -> list[str]:
+    """The entries of C whose standard error exceeds 5 % of their row's scale (the row's
+    norm: a gyro mounted rotated has near-zero diagonal entries, which made every entry
+    'poorly determined' against them)."""
     out = []
     for i in range(3):
         for j in range(3):
-            se, ref = stderr[i, j], abs(C[i, i])
+            se, ref = stderr[i, j], float(np.linalg.norm(C[i]))
             if not np.isfinite(se) or se > 0.05 * ref:
                 out.append(f"C[{i},{j}]")
     return out
@@ -1256,13 +1272,21 @@ def calibrate_gyro(
     pose_means = np.array([g[s:e].mean(axis=0) for s, e in iv])
     motions, w = _pad_motions(windows, lambda s, e: g[s:e] - bias, dt, dirs)
     k = len(windows)
-    scale = float(_compiled("start")(motions, w))
-    units, unit_notes = _resolve_units(units, abs(scale))
-    notes += unit_notes
+    scale = float(_compiled("start")(motions, w))  # C = s I: the fit's start, not its scale
     C, cov, stderr, res, after = _fit_scaled(motions, w, scale, solver)
+    # the unit from the fitted C's singular values: a gyro mounted rotated or mirrored against
+    # the accelerometer is no s I, and the start's s was 7x off on one turned 90 deg about z
+    # (a correct fit then called 'failed', units 'none fits': a new-user trial)
+    fitted = np.linalg.svd(C, compute_uv=False) if np.all(np.isfinite(C)) else None
+    units, unit_notes = _resolve_units(
+        units, float(np.median(fitted)) if fitted is not None else abs(scale)
+    )
+    notes += unit_notes
     angles = _compiled("angles")
     rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
-    nominal = UNIT_SCALES.get(units, abs(scale)) * np.sign(scale)
+    nominal = UNIT_SCALES.get(
+        units, float(np.median(fitted)) if fitted is not None else abs(scale)
+    ) * np.sign(scale)
     before = np.degrees(np.asarray(angles(np.eye(3).ravel() * nominal, motions))[:k])
     rms_raw = float("nan")
     if units in UNIT_SCALES:

@@ -94,6 +94,32 @@ def test_fit_recovers_simulated_truth_within_its_standard_errors(seed, scale, mi
     assert cal.input_units == expected
 
 
+@pytest.mark.parametrize(
+    "turn",
+    [
+        [[0, -1, 0], [1, 0, 0], [0, 0, 1]],  # gyro turned 90 deg about z
+        [[-1, 0, 0], [0, 1, 0], [0, 0, 1]],  # its x axis mirrored
+    ],
+)
+def test_a_gyro_mounted_turned_against_the_accelerometer_is_calibrated(turn):
+    """A new-user trial turned the gyro columns of mikoff/imu-calib's MPU-9150 log (MIT) by
+    90 deg about z: the fit found the turned C (miss 0.095 deg, as unturned), and the command
+    called it failed, 'gyro units: none fits', since the unit was judged from the start's
+    C = s I (7x off). The unit now comes from the fitted C's singular values; a turned C is
+    said so in the report, where imu_tk's form cannot hold it."""
+    C = np.asarray(turn, float) * np.pi / 180  # deg/s
+    sim = simulate_gyro_log(11, gyro_matrix=C, n_poses=14)
+    cal = calibrate_gyro(sim.acc, sim.gyro, t=sim.t)
+    assert cal.status == "ok" and cal.input_units == "deg/s", (cal.status, cal.warnings)
+    assert np.abs((cal.matrix - C) / cal.stderr_matrix).max() < 4.0
+    assert cal.poorly_determined == []  # near-zero entries judged against their row
+    said = cal.report()
+    if turn[0][0] == 0:
+        assert "its x, y, z read +y, -x, +z of the accelerometer's frame" in said, said
+    else:
+        assert "imu_tk form: scale K = -" in said
+
+
 def test_g_sensitivity_is_found_removed_and_reported():
     # a bias of G f (f the specific force): found by the rests' F test, G recovered to within
     # 10 % of its largest entry (measured 6 %), and the miss brought from 0.18 deg to the
