@@ -789,6 +789,9 @@ def _resolve_units(
     return units
 
 
+ACCEL6_OPTION = "--model accel6, model='accel6'"
+"""How a refusal names the six-parameter model (``calib-jax gyro`` says its own flag)."""
+
 OUTPUT_G_RANGE = {"g": (0.99, 1.01), "m/s^2": (9.7, 9.9)}
 """Gravity in each output unit it has (Earth's surface: 9.78-9.83 m/s^2); a ``g`` outside
 is another unit's number."""
@@ -959,7 +962,7 @@ def undetermined(se_n, model: str) -> str | None:
         f"the poses do not determine {', '.join(PARAM_NAMES[i] for i in bad)} (standard errors "
         f"{size}; a calibration needs under {POOR_STDERR:.0%}): the fit would move readings by "
         f"as much. Add poses held still {', and '.join(needs)}"
-        + (", or fit gains and biases alone (--model accel6)" if cross_only else "")
+        + (f", or fit gains and biases alone ({ACCEL6_OPTION})" if cross_only else "")
         + "; this is no calibration"
     )
 

@@ -611,6 +611,7 @@ def run_marg(args: argparse.Namespace) -> int:
         log,
         accel=args.accel,
         mag_model=args.mag_model,
+        acc_model=args.acc_model,
         field=args.field,
         g=args.g,
         solver=args.solver,
@@ -712,6 +713,7 @@ def run_gyro(args: argparse.Namespace) -> int:
         accel_options={
             "g": args.g,
             "units": args.units,
+            "model": args.accel_model,
             **_accel_detector(args, log.sample_rate),
         },
     )
@@ -881,6 +883,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="magnetometer ellipsoid model (default: the lowest BIC among the models the data "
         "determine)",
     )
+    g.add_argument(
+        "--acc-model",
+        default="full",
+        choices=["sphere", "diag", "full"],
+        help="the accelerometer's ellipsoid model (--accel ellipsoid; default full)",
+    )
     g.add_argument("--field", type=_pos_float, default=None, help="known field magnitude")
     g.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference (static)")
     _add_fit_options(
@@ -916,6 +924,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     gy.add_argument("--g", type=_pos_float, default=None, help="accelerometer reference")
     gy.add_argument("--units", default="auto", help="accelerometer units: auto, counts, g, m/s^2")
+    gy.add_argument(
+        "--accel-model",
+        default="auto",
+        choices=["auto", "accel9", "accel6"],
+        help="the accelerometer fit's model (as calib-jax accel --model)",
+    )
     _add_fit_options(
         gy, "t,ax,ay,az,gx,gy,gz", "the gyro calibration (kind 'gyro')",
         solvers=("lm1", "lm2", "lm3"),

@@ -968,7 +968,7 @@ class _PoseLog:
 def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _PoseLog:
     """Check the log, calibrate its accelerometer if not given, find the rests and the usable
     motions between them; a ValueError saying what to change where that fails."""
-    from .accel import REFUSALS, REST_RMS_LIMIT, calibrate_accel
+    from .accel import ACCEL6_OPTION, REFUSALS, REST_RMS_LIMIT, calibrate_accel
 
     notes: list[str] = []
     warn: list[str] = []
@@ -1069,11 +1069,17 @@ def _pose_log(data, gyro, t, sample_rate, accel, accel_options, temp=None) -> _P
         refusals = [w for w in accel.warnings if w.startswith(REFUSALS)]
         # gains no accelerometer has, none determined, or poses that are no rests: the
         # solver's "raise the budget" would contradict them
+        reasons = "; ".join(refusals + why if refusals else [accel.solver_message, *why])
+        # the accelerometer's own flags are the gyro's --accel-* (a trial ran --model accel6)
+        reasons = reasons.replace(
+            ACCEL6_OPTION,
+            "--accel-model accel6 on calib-jax gyro, accel_options={'model': 'accel6'} in Python",
+        )
         raise ValueError(
             "the accelerometer calibration "
             + ("failed" if accel.status == "failed" else "did not converge")
             + " ("
-            + "; ".join(refusals + why if refusals else [accel.solver_message, *why])
+            + reasons
             + "): the gravity directions the gyro is fitted to would be wrong; fix the "
             "accelerometer fit first"
             + (

@@ -434,6 +434,19 @@ class MARGRecord(Record):
         )
 
 
+def _own_flags(cal, which: str):
+    """The ellipsoid fit's record with its advice in this command's words: ``calib-jax marg``
+    sets each sensor's model with --acc-model / --mag-model (acc_model= / mag_model= in
+    Python), not --model (a trial ran 'calib-jax marg --model sphere', 'unrecognized
+    arguments')."""
+    import re
+
+    def own(w: str) -> str:
+        return re.sub(r"--model\b", f"--{which}-model", re.sub(r"\bmodel=", f"{which}_model=", w))
+
+    return dataclasses.replace(cal, warnings=[own(w) for w in cal.warnings])
+
+
 def calibrate_marg_log(
     log,
     *,
@@ -532,8 +545,11 @@ def calibrate_marg_log(
         with warnings.catch_warnings():  # a failed fit says why in its status and warnings
             warnings.simplefilter("ignore", FitStatusWarning)
             try:
-                acal = calibrate_mag(
-                    log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
+                acal = _own_flags(
+                    calibrate_mag(
+                        log, model=acc_model, sensor="accel", solver=solver, sensor_id=sensor_id
+                    ),
+                    "acc",
                 )
                 why = "; ".join(acal.warnings) or acal.solver_message
             except ValueError as exc:  # gravity in one plane or direction: no ellipsoid
@@ -550,6 +566,7 @@ def calibrate_marg_log(
     with warnings.catch_warnings():  # its status and warnings are in the record's mag block
         warnings.simplefilter("ignore", FitStatusWarning)
         mcal = calibrate_mag(log, model=mag_model, field=field, solver=solver, sensor_id=sensor_id)
+    mcal = _own_flags(mcal, "mag")
     acc = np.asarray(log.acc, float) if acal is None else acal.apply(log.acc)
     try:
         al = align_mag_to_accel(acc, mcal.apply(log.mag))

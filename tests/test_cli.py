@@ -776,3 +776,24 @@ def test_two_files_given_the_other_way_round_say_so(tmp_path, capsys):
     assert main(["gyro", gyro, acc]) == 2
     err = capsys.readouterr().err
     assert "names the gyroscope" in err and f"calib-jax gyro {acc} {gyro}" in err
+
+
+def test_marg_advice_names_marg_flags():
+    """A trial followed calib-jax marg's 'fit a sphere (--model sphere, ...)' and got
+    'unrecognized arguments': marg sets each sensor's model with --acc-model / --mag-model,
+    and its sensors' advice now says so (marg._own_flags)."""
+    import dataclasses
+
+    from calib_jax.cli import build_parser
+    from calib_jax.marg import _own_flags
+    from tests.test_input_checks import _mag_cal
+
+    args = build_parser().parse_args(["marg", "x.csv", "--acc-model", "sphere"])
+    assert args.acc_model == "sphere" and args.mag_model == "auto"
+    said = "fit a sphere (--model sphere, model='sphere') or record; declare it (model=..., --model)"
+    cal = _own_flags(dataclasses.replace(_mag_cal(), warnings=[said]), "acc")
+    assert cal.warnings == [
+        "fit a sphere (--acc-model sphere, acc_model='sphere') or record; declare it "
+        "(acc_model=..., --acc-model)"
+    ]
+    assert _own_flags(cal, "mag").warnings == cal.warnings  # acc_model= stays acc_model=

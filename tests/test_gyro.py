@@ -120,6 +120,28 @@ def test_a_gyro_mounted_turned_against_the_accelerometer_is_calibrated(turn):
         assert "imu_tk form: scale K = -" in said
 
 
+def test_the_accelerometer_advice_in_a_gyro_refusal_names_the_gyro_commands_flag(capsys):
+    """A trial followed a gyro refusal's '(--model accel6)' and got 'unrecognized arguments':
+    calib-jax gyro now has --accel-model, and the refusal names it (and the Python form)."""
+    import dataclasses
+
+    from calib_jax.accel import ACCEL6_OPTION, undetermined
+
+    sim = simulate_gyro_log(5, n_poses=12)
+    accel = calibrate_accel(sim.acc, sample_rate=1 / np.median(np.diff(sim.t)))
+    why = undetermined(np.r_[np.zeros(3), 0.2, 0.0, 0.0, np.zeros(3)], "accel9")
+    assert why and ACCEL6_OPTION in why  # a cross term alone undetermined: six are offered
+    failed = dataclasses.replace(accel, status="failed", warnings=[why])
+    with pytest.raises(ValueError, match=r"--accel-model accel6 on calib-jax gyro, "
+                       r"accel_options=\{'model': 'accel6'\} in Python") as err:  # fmt: skip
+        calibrate_gyro(sim.acc, sim.gyro, t=sim.t, accel=failed)
+    assert "--model accel6" not in str(err.value)
+    from calib_jax.cli import build_parser
+
+    args = build_parser().parse_args(["gyro", "x.csv", "--accel-model", "accel6"])
+    assert args.accel_model == "accel6"
+
+
 def test_g_sensitivity_is_found_removed_and_reported():
     # a bias of G f (f the specific force): found by the rests' F test, G recovered to within
     # 10 % of its largest entry (measured 6 %), and the miss brought from 0.18 deg to the
