@@ -790,7 +790,9 @@ def test_marg_advice_names_marg_flags():
 
     args = build_parser().parse_args(["marg", "x.csv", "--acc-model", "sphere"])
     assert args.acc_model == "sphere" and args.mag_model == "auto"
-    said = "fit a sphere (--model sphere, model='sphere') or record; declare it (model=..., --model)"
+    said = (
+        "fit a sphere (--model sphere, model='sphere') or record; declare it (model=..., --model)"
+    )
     cal = _own_flags(dataclasses.replace(_mag_cal(), warnings=[said]), "acc")
     assert cal.warnings == [
         "fit a sphere (--acc-model sphere, acc_model='sphere') or record; declare it "
