@@ -138,6 +138,15 @@ def test_accel_effect_is_found_and_brings_the_residual_to_the_floor(effect):
     assert d.rms_after <= 1.5 * d.noise_floor, d.summary()
     assert not d.unexplained_structure
     assert [st["added_effect"] for st in d.steps] == [None, effect]
+    # the summary says how large it is, as the JSON does (a trial found sizes only there)
+    lines = d.summary().splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.lstrip().startswith(effect))
+    if effect == "outliers":
+        assert lines[i + 1].startswith(f"    rejected {d.steps[1]['n_rejected']} observations")
+    else:
+        slot, c = next(iter(d.steps[1]["coefficients"].items()))
+        assert lines[i + 1].startswith(f"    {slot}: {1e3 * c['value'][0]:+.3g} +- ")
+        assert lines[i + 1].endswith(f" mg ({c['meaning']})"), lines[i + 1]
     # "before" and "after" are the steps table's first and last rows (issue 14 defect: before
     # was the base fit on the observations left after rejecting outliers)
     assert (d.rms_before, d.rms_after) == (d.steps[0]["rms"], d.steps[-1]["rms"])
@@ -197,6 +206,7 @@ def test_mag_drift_with_correlated_noise_judged_honestly(size, seed):
     e = next(x for x in d.rounds[0] if x["effect"] == "hard_iron_drift")
     assert e["halves_max_z"] < 3 < e["halves_max_z_formal"] and e["p_honest"] < 0.01
     c = d.steps[1]["coefficients"]["drift1"]
+    assert f"    drift1: {100 * c['value'][0]:+.3g} +- " in d.summary()  # in % of the field
     truth = size * _EFFECT_DIRS
     miss = np.abs(np.asarray(c["value"]) - truth)
     assert np.all(miss < 4 * np.asarray(c["stderr"]) + 0.05 * np.abs(truth)), (c, truth)

@@ -439,6 +439,43 @@ class Diagnosis(Record):
 
         return diagnosis_repr(self)
 
+    def _sizes(self, step: dict, f: float, u: str) -> list[str]:
+        """How large an accepted effect is, in the summary's unit, with its honest error (a
+        trial found the sizes only in the JSON): per coefficient the x, y, z values, a MARG
+        rotation or time offset, the observations an outlier step rejected."""
+        c, effect = step.get("coefficients") or {}, step.get("added_effect")
+        if effect == "outliers":
+            times = [r["t"] for r in self.rejected if r.get("t") is not None]
+            when = f", at {min(times):.4g}-{max(times):.4g} s" if times else ""
+            return [f"rejected {step.get('n_rejected', 0)} observations{when} (JSON: rejected)"]
+        if effect == "soft_iron":
+            return ["the ellipsoid's shape (W's off-sphere terms) freed: see calib-jax mag"]
+        out = []
+        if "rotvec_deg" in c:
+            r, e = np.asarray(c["rotvec_deg"]), np.asarray(c["rotvec_stderr_deg"])
+            out.append(
+                f"rotation magnetometer -> accelerometer {np.linalg.norm(r):.3g} deg; about x, "
+                "y, z "
+                + ", ".join(f"{v:+.3g} +- {s:.2g}" for v, s in zip(r, e, strict=True))
+                + " deg"
+            )
+        if "permutation" in c and c["permutation"] != "x <- +x, y <- +y, z <- +z":
+            out.append(f"axes: {c['permutation']}")
+        if "dt_s" in c:
+            dt, e = 1e3 * c["dt_s"], 1e3 * c["dt_stderr_s"]
+            who = "lags" if dt > 0 else "leads"
+            out.append(f"the magnetometer {who} the accelerometer by {abs(dt):.3g} +- {e:.2g} ms")
+        for slot, v in c.items():
+            if isinstance(v, dict) and "value" in v:
+                vals = np.asarray(v["value"], float) * f
+                errs = np.asarray(v["stderr"], float) * f
+                out.append(
+                    f"{slot}: "
+                    + ", ".join(f"{a:+.3g} +- {b:.2g}" for a, b in zip(vals, errs, strict=True))
+                    + f"{u} ({v.get('meaning', '')})"
+                )
+        return out
+
     def summary(self) -> str:
         from ..display import diagnosis_unit
 
@@ -455,6 +492,7 @@ class Diagnosis(Record):
                 f"  {s['added_effect'] or 'base':<20s} params {s['n_params']:>2d}  rms "
                 f"{s['rms'] * f:8.4f}{u}  loo {s['loo_rms'] * f:8.4f}{u}  BIC {s['bic']:10.1f}"
             )
+            lines += [f"    {x}" for x in self._sizes(s, f, u)]
         lines.append(
             f"  floor {self.noise_floor * f:.4f}{u} (white {self.noise_floor_white * f:.4f}, "
             f"Allan {self.noise_floor_allan * f:.4f}); rms {self.rms_before * f:.4f} -> "
