@@ -1524,6 +1524,8 @@ def calibrate_gyro_ferraris(
     Winv = np.linalg.inv(W)
     se = np.sqrt(np.einsum("il,jk,lj->ik", C**2, Winv**2, s_w**2))
     face_means = np.array([mean[k] for k in FERRARIS_FACES])
+    # the unit from C's scale, as calibrate_gyro's (it said 'counts' of imucal's deg/s file)
+    units, _ = _resolve_units("auto", float(np.median(np.linalg.svd(C, compute_uv=False))))
     return GyroCalibration(
         matrix=C,
         bias=bias,
@@ -1532,7 +1534,7 @@ def calibrate_gyro_ferraris(
         covariance=np.diag(se.ravel() ** 2),
         condition=float(np.linalg.cond(W)),
         status="ok",
-        input_units="counts",
+        input_units=units,
         solver="ferraris",
         solver_status=-1,
         solver_message="closed form (imucal's Ferraris equations): three turns, nine entries",

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+import calib_jax as cj
 from calib_jax.accel import calibrate_accel
 from calib_jax.cli import main
 from calib_jax.datasets import demo_log_path, gyro_demo_log_path
@@ -559,6 +560,11 @@ def test_ferraris_reproduces_imucals_published_calibration(tmp_path):
     # R_g is about -I: the session's turns read positive where imucal's protocol expects
     # -360 deg, so its gyro axes point opposite to the accelerometer's
     assert np.all(np.diag(cal.matrix) < 0)
+    # its unit from C's scale, as calibrate_gyro's: these are counts (16.4 per deg/s); the
+    # same turns in deg/s were labelled counts too (a trial, imucal's other session)
+    assert cal.input_units == "counts" and cj.calibrate_gyro_ferraris is calibrate_gyro_ferraris
+    in_deg = calibrate_gyro_ferraris(x[:, 1:4], x[:, 4:7] / 16.4, sections, sample_rate=204.8)
+    assert in_deg.input_units == "deg/s"
     cal.save(tmp_path / "f.json")
     assert GyroCalibration.load(tmp_path / "f.json") == cal
     with pytest.raises(ValueError, match="missing: z_rot"):

@@ -111,8 +111,11 @@ def _diagnose(args, log, guessed: str, defaulted: bool) -> int:
     if args.report:
         from .report import write_report
 
-        for p in write_report(d, args.report):
+        written = write_report(d, args.report)
+        for p in written:
             print(f"wrote {p}")
+        if not written:  # a trial looked for figures that were never made
+            print(f"note: no figures in {args.report}: there is no diagnosis to draw")
     if d.verdict == "not_possible":  # like every command: input that cannot be used, exit 2
         why = d.notes[0] if d.notes else "diagnosis not possible"
         print(f"error: {args.file}: {why}", file=sys.stderr)

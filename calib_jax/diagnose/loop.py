@@ -496,7 +496,7 @@ class Diagnosis(Record):
         lines.append(
             f"  floor {self.noise_floor * f:.4f}{u} (white {self.noise_floor_white * f:.4f}, "
             f"Allan {self.noise_floor_allan * f:.4f}); rms {self.rms_before * f:.4f} -> "
-            f"{self.rms_after * f:.4f}{u}"
+            f"{self.rms_after * f:.4f}{u} (the base calibration -> with the effects added)"
         )
         lines.append(f"  verdict: {self.verdict}")
         lines += [f"  note: {n}" for n in self.notes]
@@ -521,6 +521,12 @@ def _jsonable(v):
 
 # --------------------------------------------------------------------------- the loop
 
+
+SAMPLE_CLOCK_NOTE = (
+    "no time column and no sample rate: 'time' is the sample number (in the tests in time "
+    "and the figures' time axis too); give --sample-rate for seconds"
+)
+"""Said where a log has no clock (a trial read 'time [s]' running to 12,000 on CK-Explorer)."""
 
 _MEANING = {
     "drift1": "bias change over the whole log, per axis (x, y, z)",
@@ -1107,7 +1113,8 @@ def _finish(obs, res, floors, units, source, scale_to_output) -> Diagnosis:
     elif not unexplained and rms_after <= 1.5 * floor:
         notes.append(
             f"at the noise floor: rms {rms_after * scale_to_output:.3g} {units} against a floor of "
-            f"{floor * scale_to_output:.3g} {units}; nothing beyond noise"
+            f"{floor * scale_to_output:.3g} {units}; nothing beyond noise (an effect smaller than "
+            "the floor would not show in this log)"
             + (
                 " that these poses can show; the base calibration itself is poorly determined "
                 "(the next note)"
@@ -1286,10 +1293,12 @@ def diagnose_accel(
     if x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"accelerometer data must be (samples, 3), got shape {x.shape}")
     n = len(x)
+    clock = [] if t is not None or sample_rate else [SAMPLE_CLOCK_NOTE]
     if t is None:
         t = np.arange(n) / (sample_rate or 1.0)
     t = np.asarray(t, float)
     ok, det_notes = screen_samples(x, "accel")  # the way in of calibrate_accel
+    det_notes = clock + det_notes
     poses_poor: list[str] = []
     if intervals is not None:
         spans = [(int(a), int(b)) for a, b in intervals if b - a > 1 and ok[a:b].all()]
@@ -1346,8 +1355,8 @@ def diagnose_accel(
             f"{MIN_OBSERVATIONS} static intervals",
             f"{m} static intervals for 9 parameters: the split-half and leave-one-out tests "
             f"cannot run (record {MIN_OBSERVATIONS - m} or more further poses, each held still "
-            "for a second or more, in new orientations; calib-jax accel calibrates this log as "
-            "it is)",
+            "for a second or more, in new orientations; calib-jax accel fits the log as it is "
+            "and says whether that is a calibration)",
             source,
         )
         d.notes.extend(det_notes)
@@ -1479,6 +1488,8 @@ def diagnose_mag(
         raise ValueError(f"model must be 'auto', 'full', 'diag' or 'sphere', got {model!r}")
     ok, screen_notes = screen_samples(x, "mag")  # the way in of calibrate_mag
     n = len(x)
+    if t is None and not sample_rate:
+        screen_notes = [SAMPLE_CLOCK_NOTE, *screen_notes]
     if t is None:
         t = np.arange(n) / (sample_rate or 1.0)
     t = np.asarray(t, float)

@@ -31,6 +31,13 @@ def _lonlat(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.degrees(np.arctan2(u[:, 1], u[:, 0])), np.degrees(np.arcsin(np.clip(u[:, 2], -1, 1)))
 
 
+def _time_label(d: Diagnosis) -> str:
+    """The time axis' label: seconds, or the sample number of a log without a clock."""
+    from .loop import SAMPLE_CLOCK_NOTE
+
+    return "sample number (no clock)" if SAMPLE_CLOCK_NOTE in d.notes else "time [s]"
+
+
 def residual_time(d: Diagnosis) -> Figure:
     f, unit = _scale(d)
     fig = Figure(figsize=(9, 4), layout="constrained")
@@ -43,7 +50,7 @@ def residual_time(d: Diagnosis) -> Figure:
     ax.plot(t[act], d.e_final[act] * f, ".", ms=3, color="tab:blue", label="final model")
     if (~act).any():
         ax.plot(t[~act], d.e_base[~act] * f, "kx", ms=7, label="rejected")
-    ax.set_xlabel("time [s]")
+    ax.set_xlabel(_time_label(d))
     ax.set_ylabel(f"{'angle - fitted' if d.sensor == 'marg' else '|y| - 1'} [{unit}]")
     ax.set_title(f"residual against time: {', '.join(d.effects) or 'nothing added'}")
     ax.legend(fontsize=8, loc="upper right")
@@ -141,7 +148,7 @@ def angle_time(d: Diagnosis) -> Figure:
         ("after", d.theta_final, d.e_final, "tab:blue"),
     ):
         ax.plot(t, np.degrees(theta[3] + e), ".", ms=2, color=c, label=f"{name}")
-    ax.set_xlabel("time [s]")
+    ax.set_xlabel(_time_label(d))
     ax.set_ylabel("angle between gravity and field [deg]")
     ax.set_title(f"gravity-field angle: {', '.join(d.effects) or 'nothing added'}", fontsize=9)
     ax.legend(fontsize=8)
