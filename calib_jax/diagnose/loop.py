@@ -494,6 +494,10 @@ class Diagnosis(Record):
             )
             lines += [f"    {x}" for x in self._sizes(s, f, u)]
         lines.append(
+            "  (rms: each model's error; loo: each stretch of the log predicted by the fit "
+            "without it; BIC: lower is better)"
+        )
+        lines.append(
             f"  floor {self.noise_floor * f:.4f}{u} (white {self.noise_floor_white * f:.4f}, "
             f"Allan {self.noise_floor_allan * f:.4f}); rms {self.rms_before * f:.4f} -> "
             f"{self.rms_after * f:.4f}{u} (the base calibration -> with the effects added)"
