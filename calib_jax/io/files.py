@@ -621,7 +621,10 @@ def _rate_in_comment(line: str) -> float | None:
 def _rate_in_banner(line: str) -> float | None:
     """The rate in a device's banner line above the data, as ActiLife writes it: '---- Data
     File Created By ActiGraph GT3X+ ActiLife v6.13.3 ... date format M/d/yyyy at 90 Hz
-    Filter Normal ----' (a new-user trial's raw export was fitted in samples, not seconds)."""
+    Filter Normal ----' (a new-user trial's raw export was fitted in samples, not seconds).
+    Only ActiGraph's banner: elsewhere 'at N Hz' can be a filter's cut-off, not the rate."""
+    if not re.search(r"actigraph|actilife", line, re.I):
+        return None
     m = re.search(r"(?<![a-z])at\s+([0-9]+(?:\.[0-9]+)?)\s*hz\b", line, re.I)
     return float(m.group(1)) if m else None
 
